@@ -1,0 +1,79 @@
+"""Mesh connectivity and differential quantities, vectorised (no per-vertex Python loops)."""
+
+from __future__ import annotations
+
+import numpy as np
+import scipy.sparse as sp
+
+
+def unique_edges(faces: np.ndarray) -> np.ndarray:
+    """(E, 2) undirected edges (i < j), sorted, from (F, 3) triangles."""
+    f = np.asarray(faces, dtype=np.int64)
+    e = np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]], axis=0)
+    e.sort(axis=1)
+    return np.unique(e, axis=0)
+
+
+def directed_edges(faces: np.ndarray) -> np.ndarray:
+    """(2, 2E) both directions of every undirected edge: row 0 senders, row 1 receivers."""
+    e = unique_edges(faces)
+    return np.concatenate([e.T, e[:, ::-1].T], axis=1)
+
+
+def face_pairs(faces: np.ndarray) -> np.ndarray:
+    """(M, 2) indices of faces sharing an edge (interior edges of a manifold mesh)."""
+    f = np.asarray(faces, dtype=np.int64)
+    nf = len(f)
+    e = np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]], axis=0)
+    e.sort(axis=1)
+    face_id = np.tile(np.arange(nf), 3)
+    key = e[:, 0] * (int(e.max(initial=0)) + 1) + e[:, 1]
+    order = np.argsort(key, kind="stable")
+    key, face_id = key[order], face_id[order]
+    same = key[1:] == key[:-1]
+    return np.stack([face_id[:-1][same], face_id[1:][same]], axis=1)
+
+
+def face_normals(vertices: np.ndarray, faces: np.ndarray, normalize: bool = True) -> np.ndarray:
+    """(F, 3) face normals (unit, or area-weighted when ``normalize`` is False)."""
+    v = np.asarray(vertices)
+    f = np.asarray(faces)
+    n = np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]])
+    if normalize:
+        n = n / np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-20)
+    return n
+
+
+def vertex_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """(V, 3) unit vertex normals, area-weighted average of incident face normals."""
+    v = np.asarray(vertices)
+    f = np.asarray(faces)
+    fn = face_normals(v, f, normalize=False)
+    vn = np.zeros_like(v, dtype=np.float64)
+    for k in range(3):
+        np.add.at(vn, f[:, k], fn)
+    return (vn / np.maximum(np.linalg.norm(vn, axis=1, keepdims=True), 1e-20)).astype(v.dtype)
+
+
+def uniform_laplacian(faces: np.ndarray, num_vertices: int) -> sp.csr_matrix:
+    """Uniform Laplacian L = I - D^-1 A (rows sum to zero); L @ V is each vertex minus its neighbours' mean."""
+    e = unique_edges(faces)
+    rows = np.concatenate([e[:, 0], e[:, 1]])
+    cols = np.concatenate([e[:, 1], e[:, 0]])
+    adj = sp.coo_matrix((np.ones(len(rows)), (rows, cols)), shape=(num_vertices, num_vertices)).tocsr()
+    deg = np.asarray(adj.sum(axis=1)).ravel()
+    inv = np.where(deg > 0, 1.0 / np.maximum(deg, 1), 0.0)
+    return (sp.identity(num_vertices, format="csr") - sp.diags(inv) @ adj).tocsr()
+
+
+def face_areas(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    return 0.5 * np.linalg.norm(face_normals(vertices, faces, normalize=False), axis=1)
+
+
+def boundary_edges(faces: np.ndarray) -> np.ndarray:
+    """(B, 2) edges used by exactly one face (the mesh border)."""
+    f = np.asarray(faces, dtype=np.int64)
+    e = np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]], axis=0)
+    e.sort(axis=1)
+    uniq, counts = np.unique(e, axis=0, return_counts=True)
+    return uniq[counts == 1]
