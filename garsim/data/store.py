@@ -1,0 +1,270 @@
+"""On-disk dataset store: one compressed ``.npz`` per simulated sequence + a JSONL manifest.
+
+Layout of a dataset folder::
+
+    manifest.jsonl        one line per stored sequence: id, file, sha256, bytes, split, type, fabric, ...
+    rejected.jsonl        sequences the simulator rejected, with the reason (skipped on resume)
+    body_faces/<key>.npy  body faces, stored once per body topology
+    sequences/<id>.npz    arrays of one sequence (no pickle; metadata as a JSON string)
+
+A sequence holds one garment instance on one body: the canonical body, the settled template,
+and K stored frames (target body, LBS prior, ground truth), at full and at low resolution.
+Every write is atomic (temp file + rename); the manifest is appended by one writer.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import io
+import json
+import os
+import tempfile
+from collections import Counter
+from collections.abc import Iterator
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from garsim.data.sample import Sample
+
+MANIFEST = "manifest.jsonl"
+REJECTED = "rejected.jsonl"
+RESOLUTIONS = ("full", "low")
+
+
+class StoreError(RuntimeError):
+    """A dataset folder or file is missing, truncated or corrupt."""
+
+
+@dataclass
+class GarmentLevel:
+    """One resolution of a sequence's garment: template, faces, pins, and per-frame prior / truth."""
+
+    template: np.ndarray  # (N, 3) settled on the canonical body
+    faces: np.ndarray  # (F, 3)
+    pinned: np.ndarray  # (N,) bool
+    priors: np.ndarray  # (K, N, 3)
+    targets: np.ndarray  # (K, N, 3)
+
+
+@dataclass
+class SequenceRecord:
+    """A simulated sequence: one garment on one body, K stored frames, full + low resolution."""
+
+    seq_id: str
+    split: str
+    garment_type: str
+    fabric: str
+    body_canonical: np.ndarray  # (Vb, 3)
+    body_targets: np.ndarray  # (K, Vb, 3)
+    body_faces: np.ndarray  # (Fb, 3)
+    frames: np.ndarray  # (K,) frame index of each stored frame
+    levels: dict[str, GarmentLevel]
+    meta: dict[str, Any] = field(default_factory=dict)
+
+    def samples(self, resolution: str = "low") -> list[Sample]:
+        """The K model samples of this sequence at one resolution."""
+        lv = self.levels[resolution]
+        return [
+            Sample(
+                body_canonical=self.body_canonical,
+                body_target=self.body_targets[k],
+                body_faces=self.body_faces,
+                garment=lv.template,
+                garment_faces=lv.faces,
+                pinned=lv.pinned,
+                prior=lv.priors[k],
+                target=lv.targets[k],
+                fabric=self.fabric,
+                garment_type=self.garment_type,
+                meta={**self.meta, "seq_id": self.seq_id, "frame": int(self.frames[k]), "split": self.split},
+            )
+            for k in range(len(self.frames))
+        ]
+
+
+def faces_key(faces: np.ndarray) -> str:
+    """Short content hash naming a body topology."""
+    return hashlib.sha256(np.ascontiguousarray(faces, dtype=np.int64).tobytes()).hexdigest()[:16]
+
+
+def atomic_write_bytes(path: Path, data: bytes) -> None:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    try:
+        with os.fdopen(fd, "wb") as fh:
+            fh.write(data)
+            fh.flush()
+            os.fsync(fh.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+        raise
+
+
+class DatasetStore:
+    """Read and write a dataset folder (see module docstring)."""
+
+    def __init__(self, root: str | os.PathLike) -> None:
+        self.root = Path(root)
+
+    # -- writing -------------------------------------------------------------------------
+    def write_sequence(self, rec: SequenceRecord) -> dict[str, Any]:
+        """Write a sequence file atomically and return its manifest entry (not yet appended)."""
+        key = faces_key(rec.body_faces)
+        faces_path = self.root / "body_faces" / f"{key}.npy"
+        if not faces_path.exists():
+            buf = io.BytesIO()
+            np.save(buf, np.ascontiguousarray(rec.body_faces, dtype=np.int64), allow_pickle=False)
+            atomic_write_bytes(faces_path, buf.getvalue())
+        arrays: dict[str, np.ndarray] = {
+            "body_canonical": rec.body_canonical.astype(np.float32),
+            "body_targets": rec.body_targets.astype(np.float32),
+            "frames": rec.frames.astype(np.int64),
+            "meta": np.frombuffer(json.dumps(rec.meta).encode(), dtype=np.uint8),
+        }
+        for res, lv in rec.levels.items():
+            arrays[f"{res}/template"] = lv.template.astype(np.float32)
+            arrays[f"{res}/faces"] = lv.faces.astype(np.int64)
+            arrays[f"{res}/pinned"] = lv.pinned.astype(bool)
+            arrays[f"{res}/priors"] = lv.priors.astype(np.float32)
+            arrays[f"{res}/targets"] = lv.targets.astype(np.float32)
+        buf = io.BytesIO()
+        np.savez_compressed(buf, **arrays)
+        data = buf.getvalue()
+        rel = f"sequences/{rec.seq_id}.npz"
+        atomic_write_bytes(self.root / rel, data)
+        return {
+            "id": rec.seq_id,
+            "file": rel,
+            "sha256": hashlib.sha256(data).hexdigest(),
+            "bytes": len(data),
+            "split": rec.split,
+            "garment_type": rec.garment_type,
+            "fabric": rec.fabric,
+            "body_faces": key,
+            "num_frames": int(len(rec.frames)),
+            "num_vertices": {res: int(len(lv.template)) for res, lv in rec.levels.items()},
+        }
+
+    def append_manifest(self, entry: dict[str, Any], name: str = MANIFEST) -> None:
+        """Append one JSON line (single writer), flushed to disk."""
+        self.root.mkdir(parents=True, exist_ok=True)
+        with open(self.root / name, "a", encoding="utf-8") as fh:
+            fh.write(json.dumps(entry, sort_keys=True) + "\n")
+            fh.flush()
+            os.fsync(fh.fileno())
+
+    # -- reading -------------------------------------------------------------------------
+    def entries(self, name: str = MANIFEST) -> list[dict[str, Any]]:
+        """Manifest entries; a torn last line (interrupted append) is ignored."""
+        path = self.root / name
+        if not path.exists():
+            return []
+        out = []
+        for line in path.read_text(encoding="utf-8").splitlines():
+            try:
+                out.append(json.loads(line))
+            except json.JSONDecodeError:
+                continue
+        return out
+
+    def done_ids(self) -> set[str]:
+        """Sequence ids already stored or rejected (skipped when resuming)."""
+        return {e["id"] for e in self.entries()} | {e["id"] for e in self.entries(REJECTED)}
+
+    def _faces(self, key: str) -> np.ndarray:
+        path = self.root / "body_faces" / f"{key}.npy"
+        if not path.exists():
+            raise StoreError(f"{path} is missing: the dataset folder is incomplete, regenerate it")
+        return np.load(path, allow_pickle=False)
+
+    def read_sequence(self, entry: dict[str, Any]) -> SequenceRecord:
+        path = self.root / entry["file"]
+        try:
+            with np.load(path, allow_pickle=False) as z:
+                arrays = {k: z[k] for k in z.files}
+        except FileNotFoundError:
+            raise StoreError(f"{path} is listed in the manifest but missing") from None
+        except Exception as exc:  # zipfile/zlib/ValueError on truncated or corrupt files
+            raise StoreError(f"{path} is truncated or corrupt ({type(exc).__name__}: {exc})") from None
+        meta = json.loads(arrays.pop("meta").tobytes().decode())
+        levels = {
+            res: GarmentLevel(
+                template=arrays[f"{res}/template"],
+                faces=arrays[f"{res}/faces"],
+                pinned=arrays[f"{res}/pinned"],
+                priors=arrays[f"{res}/priors"],
+                targets=arrays[f"{res}/targets"],
+            )
+            for res in RESOLUTIONS
+            if f"{res}/template" in arrays
+        }
+        return SequenceRecord(
+            seq_id=entry["id"],
+            split=entry["split"],
+            garment_type=entry["garment_type"],
+            fabric=entry["fabric"],
+            body_canonical=arrays["body_canonical"],
+            body_targets=arrays["body_targets"],
+            body_faces=self._faces(entry["body_faces"]),
+            frames=arrays["frames"],
+            levels=levels,
+            meta=meta,
+        )
+
+    def sequences(self, split: str | None = None) -> Iterator[SequenceRecord]:
+        for entry in self.entries():
+            if split is None or entry["split"] == split:
+                yield self.read_sequence(entry)
+
+    def samples(self, split: str | None = None, resolution: str = "low") -> list[Sample]:
+        """All samples of a split (all splits when None) at one resolution."""
+        if resolution not in RESOLUTIONS:
+            raise ValueError(f"resolution must be one of {RESOLUTIONS}, got {resolution!r}")
+        return [s for rec in self.sequences(split) for s in rec.samples(resolution)]
+
+    # -- inspection ----------------------------------------------------------------------
+    def info(self) -> dict[str, Any]:
+        """Counts of sequences and frames per split / garment type / fabric, and disk size."""
+        entries = self.entries()
+        frames: Counter[str] = Counter()
+        seqs: Counter[str] = Counter()
+        for e in entries:
+            for key in (f"split={e['split']}", f"type={e['garment_type']}", f"fabric={e['fabric']}"):
+                seqs[key] += 1
+                frames[key] += e["num_frames"]
+        return {
+            "root": str(self.root),
+            "sequences": len(entries),
+            "frames": sum(e["num_frames"] for e in entries),
+            "rejected": len(self.entries(REJECTED)),
+            "bytes": sum(e["bytes"] for e in entries),
+            "sequences_by": dict(sorted(seqs.items())),
+            "frames_by": dict(sorted(frames.items())),
+        }
+
+    def verify(self) -> list[str]:
+        """Problems found (empty when the store is sound): missing, truncated or corrupt files."""
+        if not (self.root / MANIFEST).exists():
+            return [f"{self.root / MANIFEST} not found: not a garsim dataset folder"]
+        problems = []
+        for e in self.entries():
+            path = self.root / e["file"]
+            if not path.exists():
+                problems.append(f"{path}: missing")
+                continue
+            data = path.read_bytes()
+            if len(data) != e["bytes"]:
+                problems.append(f"{path}: truncated ({len(data)} of {e['bytes']} bytes)")
+            elif hashlib.sha256(data).hexdigest() != e["sha256"]:
+                problems.append(f"{path}: checksum mismatch (corrupt)")
+            else:
+                try:
+                    self.read_sequence(e)
+                except StoreError as exc:
+                    problems.append(str(exc))
+        return problems
