@@ -1,0 +1,135 @@
+"""The public drape API: meshes in, the garment on the target body out."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from garsim.bodies.prior import rigfree_prior
+from garsim.data.sample import FABRICS, Sample
+from garsim.geometry.io import MeshError, as_mesh
+
+WEIGHTS_DIR = Path(__file__).parent / "weights"
+
+
+def _pinned_mask(pinned: Any, n: int) -> np.ndarray:
+    if pinned is None:
+        return np.zeros(n, dtype=bool)
+    p = np.asarray(pinned)
+    if p.dtype == bool:
+        if p.shape != (n,):
+            raise ValueError(f"pinned mask has shape {p.shape}; expected ({n},) booleans, one per garment vertex")
+        return p
+    idx = p.astype(np.int64).ravel()
+    if idx.size and (idx.min() < 0 or idx.max() >= n):
+        raise ValueError(f"pinned indices must be in [0, {n}), got range [{idx.min()}, {idx.max()}]")
+    mask = np.zeros(n, dtype=bool)
+    mask[idx] = True
+    return mask
+
+
+def make_sample(
+    body_canonical: Any,
+    body_target: Any,
+    garment: Any,
+    fabric: str = "cotton",
+    pinned: Any = None,
+    garment_type: str = "unknown",
+) -> Sample:
+    """Validate user meshes and build the model's input record (with the garment prior)."""
+    if fabric not in FABRICS:
+        raise ValueError(f"unknown fabric {fabric!r}; choose one of {', '.join(FABRICS)}")
+    bc, bf = as_mesh(body_canonical, "canonical body")
+    bt, bf_t = as_mesh(body_target, "target body")
+    g, gf = as_mesh(garment, "garment")
+    if bc.shape != bt.shape or bf.shape != bf_t.shape or not np.array_equal(bf, bf_t):
+        raise MeshError(
+            f"canonical body ({len(bc)} vertices, {len(bf)} faces) and target body ({len(bt)} vertices, "
+            f"{len(bf_t)} faces) must share one topology: pose the same body mesh"
+        )
+    prior = rigfree_prior(g, bc, bt, bf)
+    return Sample(
+        body_canonical=bc,
+        body_target=bt,
+        body_faces=bf,
+        garment=g,
+        garment_faces=gf,
+        pinned=_pinned_mask(pinned, len(g)),
+        prior=prior,
+        fabric=fabric,
+        garment_type=garment_type,
+    )
+
+
+class GarSim:
+    """Drapes a garment from a canonical body onto a target body in one step.
+
+    ``GarSim.prior_only()`` returns the garment deformation prior (LBS-like skinning), the
+    baseline every learned model must beat.
+    """
+
+    def __init__(self, model: Any = None) -> None:
+        self.model = model
+
+    @property
+    def name(self) -> str:
+        return "GarSim model" if self.model is not None else "skinning prior"
+
+    @classmethod
+    def prior_only(cls) -> "GarSim":
+        return cls(model=None)
+
+    @classmethod
+    def pretrained(cls) -> "GarSim":
+        """The model shipped inside the package (``garsim/weights``)."""
+        path = WEIGHTS_DIR / "garsim.safetensors"
+        if not path.exists():
+            raise FileNotFoundError(
+                f"no pretrained weights at {path}: this build ships no trained model yet; "
+                "use GarSim.prior_only() (or `garsim drape --prior-only`)"
+            )
+        from garsim.model.garsim import GarSimModel
+
+        return cls(model=GarSimModel.load(path))
+
+    @classmethod
+    def default(cls) -> "GarSim":
+        """The shipped model when present, else the prior."""
+        try:
+            return cls.pretrained()
+        except FileNotFoundError:
+            return cls.prior_only()
+
+    def drape_on(self, body: Any, canonical: Any, target: Any, garment: Any, fabric: str = "cotton") -> np.ndarray:
+        """Drape a ``Garment`` using a rigged ``BodyModel`` and its posed bodies (exact LBS prior)."""
+        from garsim.bodies.prior import garment_prior
+
+        prior = garment_prior(body, canonical, target, garment.vertices)
+        if self.model is None:
+            return prior
+        sample = Sample(
+            body_canonical=canonical.vertices, body_target=target.vertices, body_faces=body.faces,
+            garment=garment.vertices, garment_faces=garment.faces, pinned=garment.pinned, prior=prior,
+            fabric=fabric, garment_type=garment.kind,
+        )
+        return self.model.predict(sample)
+
+    def drape(
+        self,
+        body_canonical: Any,
+        body_target: Any,
+        garment: Any,
+        fabric: str = "cotton",
+        pinned: Any = None,
+    ) -> np.ndarray:
+        """Predicted garment vertices (N, 3) on ``body_target``.
+
+        Each mesh is a ``trimesh.Trimesh``, a ``(vertices, faces)`` pair of arrays or a file path;
+        both bodies share one topology; ``garment`` is draped on ``body_canonical``.
+        """
+        sample = make_sample(body_canonical, body_target, garment, fabric, pinned)
+        if self.model is None:
+            return sample.prior
+        return self.model.predict(sample)

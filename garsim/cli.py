@@ -1,0 +1,150 @@
+"""The ``garsim`` command line: thin wrappers that parse, call the library, and report."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import logging
+import sys
+from pathlib import Path
+
+
+from garsim.data.sample import FABRICS
+
+
+def _shard(text: str) -> tuple[int, int]:
+    try:
+        k, n = (int(x) for x in text.split("/"))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"--shard must look like K/N (e.g. 0/4), got {text!r}") from None
+    if not (n >= 1 and 0 <= k < n):
+        raise argparse.ArgumentTypeError(f"--shard K/N needs 0 <= K < N, got {text!r}")
+    return k, n
+
+
+def cmd_demo(args: argparse.Namespace) -> int:
+    from garsim.demo import DemoConfig, run_demo
+
+    outputs = run_demo(DemoConfig(out=Path(args.out), seed=args.seed, target_vertices=args.vertices))
+    for path in outputs:
+        print(path)
+    return 0
+
+
+def cmd_drape(args: argparse.Namespace) -> int:
+    import numpy as np
+
+    from garsim.api import GarSim
+    from garsim.geometry.io import load_mesh, save_mesh
+
+    sim = GarSim.pretrained() if not args.prior_only else GarSim.prior_only()
+    garment = load_mesh(args.garment)
+    pinned = np.loadtxt(args.pinned, dtype=np.int64, ndmin=1) if args.pinned else None
+    verts = sim.drape(args.canonical, args.target, garment, fabric=args.fabric, pinned=pinned)
+    save_mesh(args.out, verts, garment[1], y_up=args.y_up)
+    print(args.out)
+    if args.png:
+        from garsim.geometry.render import render_views
+
+        print(render_views(args.png, [load_mesh(args.target), (verts, garment[1])]))
+    return 0
+
+
+def cmd_data_generate(args: argparse.Namespace) -> int:
+    from garsim.physics.generate import GenerateConfig, generate
+
+    cfg = GenerateConfig(
+        out=Path(args.out),
+        seed=args.seed,
+        num_train=args.train,
+        num_test=args.test,
+        num_generalization=args.generalization,
+        target_vertices=args.vertices,
+        workers=args.workers,
+        shard=args.shard,
+        limit=args.limit,
+    )
+    summary = generate(cfg, progress=not args.quiet)
+    secs = summary.pop("seconds")
+    if secs:
+        summary["mean_seconds_per_sequence"] = round(sum(secs) / len(secs), 2)
+    print(json.dumps(summary, indent=2))
+    return 0
+
+
+def cmd_data_info(args: argparse.Namespace) -> int:
+    from garsim.data.store import DatasetStore
+
+    print(json.dumps(DatasetStore(args.dir).info(), indent=2))
+    return 0
+
+
+def cmd_data_verify(args: argparse.Namespace) -> int:
+    from garsim.data.store import DatasetStore
+
+    problems = DatasetStore(args.dir).verify()
+    for p in problems:
+        print(p)
+    print(f"{len(problems)} problem(s) found" if problems else "ok: every listed file is complete and intact")
+    return 1 if problems else 0
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog="garsim", description=__doc__)
+    parser.add_argument("-v", "--verbose", action="store_true", help="log at INFO level")
+    sub = parser.add_subparsers(dest="command", required=True)
+
+    p = sub.add_parser("demo", help="drape the five garment types on two body shapes; write OBJ + PNG")
+    p.add_argument("--out", default="demo_out", help="output folder")
+    p.add_argument("--seed", type=int, default=0, help="seed of the target poses")
+    p.add_argument("--vertices", type=int, default=2500, help="garment resolution (vertices)")
+    p.set_defaults(func=cmd_demo)
+
+    p = sub.add_parser("drape", help="drape a garment mesh from a canonical body onto a target body")
+    p.add_argument("--canonical", required=True, help="canonical body mesh (OBJ/PLY/GLB)")
+    p.add_argument("--target", required=True, help="target body mesh, same topology as --canonical")
+    p.add_argument("--garment", required=True, help="garment mesh draped on the canonical body")
+    p.add_argument("--fabric", default="cotton", choices=FABRICS)
+    p.add_argument("--pinned", help="text file of pinned garment vertex indices (optional)")
+    p.add_argument("--out", required=True, help="output garment mesh path")
+    p.add_argument("--png", help="also render target body + draped garment to this PNG")
+    p.add_argument("--y-up", action="store_true", help="write the output Y-up (Blender/glTF)")
+    p.add_argument("--prior-only", action="store_true", help="use the skinning prior, not the model")
+    p.set_defaults(func=cmd_drape)
+
+    data = sub.add_parser("data", help="ground-truth datasets").add_subparsers(dest="data_command", required=True)
+    p = data.add_parser("generate", help="simulate a dataset with Newton (resumable)")
+    p.add_argument("--out", required=True, help="dataset folder (outside the source tree)")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--train", type=int, default=300, help="training sequences (skirts, tops)")
+    p.add_argument("--test", type=int, default=50, help="test sequences (skirts, tops)")
+    p.add_argument("--generalization", type=int, default=20, help="sequences of unseen garment types")
+    p.add_argument("--vertices", type=int, default=1600, help="full-resolution garment vertices")
+    p.add_argument("--workers", type=int, default=2, help="parallel simulation processes")
+    p.add_argument("--shard", type=_shard, default=(0, 1), help="K/N: run every N-th job from K")
+    p.add_argument("--limit", type=int, help="stop after this many sequences (smoke runs)")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.set_defaults(func=cmd_data_generate)
+    p = data.add_parser("info", help="counts per split / type / fabric and disk size")
+    p.add_argument("dir")
+    p.set_defaults(func=cmd_data_info)
+    p = data.add_parser("verify", help="find missing, truncated or corrupt files")
+    p.add_argument("dir")
+    p.set_defaults(func=cmd_data_verify)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    logging.basicConfig(level=logging.INFO if args.verbose else logging.WARNING, format="%(levelname)s %(message)s")
+    try:
+        return int(args.func(args) or 0)
+    except (ValueError, FileNotFoundError, RuntimeError) as exc:
+        print(f"garsim: error: {exc}", file=sys.stderr)
+        return 2
+
+
+if __name__ == "__main__":
+    sys.exit(main())
+
+
