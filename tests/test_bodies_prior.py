@@ -1,0 +1,61 @@
+import numpy as np
+import pytest
+
+from garsim.bodies.anny import AnnyBody
+from garsim.bodies.base import PosedBody
+from garsim.bodies.prior import garment_prior, rigfree_prior, vertex_rotations
+
+POSE = {"upperleg01.L": [-0.8, 0.0, 0.0], "spine02": [0.0, 0.0, 0.5], "lowerarm01.R": [0.0, 0.0, 1.0]}
+
+
+@pytest.fixture(scope="module")
+def body():
+    return AnnyBody({})
+
+
+def shell(body: AnnyBody, offset: float = 0.02, step: int = 6) -> np.ndarray:
+    """Points 2 cm outside the canonical body (a garment-like shell)."""
+    from garsim.geometry.mesh import vertex_normals
+
+    c = body.canonical().vertices
+    return (c + offset * vertex_normals(c, body.faces))[::step]
+
+
+def test_rotations_of_a_rigid_rotation_are_that_rotation():
+    import trimesh
+
+    m = trimesh.creation.icosphere(subdivisions=2)
+    angle = 0.7
+    r = np.array([[np.cos(angle), -np.sin(angle), 0], [np.sin(angle), np.cos(angle), 0], [0, 0, 1]])
+    rot = vertex_rotations(m.vertices, m.vertices @ r.T + [1.0, 2.0, 3.0], m.faces)
+    np.testing.assert_allclose(rot, np.broadcast_to(r, rot.shape), atol=1e-9)
+
+
+def test_rigfree_prior_moves_rigidly_with_a_rigid_body_motion():
+    import trimesh
+
+    m = trimesh.creation.icosphere(subdivisions=3)
+    g = np.asarray(m.vertices[::3]) * 1.1
+    angle = -0.4
+    r = np.array([[1, 0, 0], [0, np.cos(angle), -np.sin(angle)], [0, np.sin(angle), np.cos(angle)]])
+    t = np.array([0.3, -0.2, 0.5])
+    prior = rigfree_prior(g, m.vertices, m.vertices @ r.T + t, m.faces)
+    np.testing.assert_allclose(prior, g @ r.T + t, atol=1e-5)
+
+
+def test_identity_pose_gives_identity_prior(body):
+    c = body.canonical()
+    g = shell(body)
+    np.testing.assert_allclose(garment_prior(body, c, c, g), g, atol=1e-5)
+    np.testing.assert_allclose(rigfree_prior(g, c.vertices, c.vertices, body.faces), g, atol=1e-5)
+
+
+def test_rigfree_prior_matches_lbs_prior_on_anny(body):
+    c, t = body.canonical(), body.pose(POSE)
+    g = shell(body)
+    lbs = garment_prior(body, c, t, g)
+    free = garment_prior(body, PosedBody(c.vertices), PosedBody(t.vertices), g)  # no transforms -> rig-free
+    err = np.linalg.norm(lbs - free, axis=1)
+    assert err.mean() < 1e-3 and np.percentile(err, 95) < 3e-3, (err.mean(), np.percentile(err, 95))
+    moved = np.linalg.norm(lbs - g, axis=1)
+    assert moved.max() > 0.3  # the pose really moves the garment (the leg is raised)
