@@ -1,0 +1,261 @@
+"""Triangle-mesh I/O through trimesh that preserves vertex order, with validation.
+
+Every mesh that enters garsim goes through :func:`validate_mesh`, which either returns clean
+``float32 (V, 3)`` vertices and ``int64 (F, 3)`` faces or raises a one-line :class:`MeshError`
+saying what is wrong and how to fix it.
+
+Checks (errors): no vertices, no faces, NaN/inf coordinates, face indices out of range,
+degenerate faces (a repeated vertex index, or zero area).
+Repairs (documented, silent): polygons with more than three corners are triangulated
+(trimesh does it on load for OBJ/PLY/OFF; :func:`validate_mesh` fan-triangulates an
+``(F, k > 3)`` face array); unreferenced vertices are kept, so indices never shift.
+
+Vertex order: files are read with ``process=False`` (no merging, no reordering) and OBJ with
+``maintain_order=True``. STL stores a triangle soup without shared vertices; it is merged on load
+(the order is then the order of first appearance) and cannot round-trip vertex order.
+
+Axes: garsim works in metres with Z up and the body facing -Y. glTF and Blender's importers use
+Y up; ``save_mesh(..., y_up=True)`` rotates Z-up -> Y-up ((x, y, z) -> (x, z, -y), so the body
+faces +Z as glTF expects) and ``load_mesh(..., y_up=True)`` rotates back.
+"""
+
+from __future__ import annotations
+
+import os
+import tempfile
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+SUPPORTED_EXTENSIONS: tuple[str, ...] = (".obj", ".ply", ".glb", ".gltf", ".off", ".stl")
+"""File types :func:`load_mesh` reads; :func:`save_mesh` writes all but ``.gltf``."""
+
+DEGENERATE_AREA_RTOL = 1e-12
+"""A face is degenerate when its area is below this times the squared bounding-box diagonal."""
+
+# Z-up (garsim) -> Y-up (glTF/Blender): rotate -90 degrees about X.
+_Z_TO_Y = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, -1.0, 0.0]])
+
+
+class MeshError(ValueError):
+    """A mesh (file or arrays) that garsim cannot use; the message says what to fix."""
+
+
+def z_up_to_y_up(vertices: np.ndarray) -> np.ndarray:
+    """Rotate Z-up points to Y-up ((x, y, z) -> (x, z, -y)); the body's front -Y becomes +Z."""
+    v = np.asarray(vertices)
+    return (v @ _Z_TO_Y.T).astype(v.dtype, copy=False)
+
+
+def y_up_to_z_up(vertices: np.ndarray) -> np.ndarray:
+    """Inverse of :func:`z_up_to_y_up` ((x, y, z) -> (x, -z, y))."""
+    v = np.asarray(vertices)
+    return (v @ _Z_TO_Y).astype(v.dtype, copy=False)
+
+
+def triangulate_polygons(faces: np.ndarray) -> np.ndarray:
+    """Fan-triangulate an (F, k >= 3) polygon array into (F * (k - 2), 3) triangles, face by face."""
+    f = np.asarray(faces)
+    k = f.shape[1]
+    if k == 3:
+        return f
+    fans = [f[:, [0, j, j + 1]] for j in range(1, k - 1)]
+    return np.stack(fans, axis=1).reshape(-1, 3)
+
+
+def validate_mesh(vertices: Any, faces: Any, name: str = "mesh") -> tuple[np.ndarray, np.ndarray]:
+    """Check and normalise a triangle mesh -> (float32 (V, 3) vertices, int64 (F, 3) faces).
+
+    Raises :class:`MeshError` naming ``name`` for: no vertices/faces, wrong shapes, NaN/inf
+    coordinates, out-of-range indices, degenerate faces. ``(F, k > 3)`` polygons are fan-triangulated.
+    """
+    try:
+        v = np.asarray(vertices, dtype=np.float64)
+    except (TypeError, ValueError) as exc:
+        raise MeshError(f"{name}: vertices are not a numeric (V, 3) array ({exc})") from None
+    if v.size == 0:
+        raise MeshError(f"{name}: the mesh has no vertices; check the file is a non-empty triangle mesh")
+    if v.ndim != 2 or v.shape[1] != 3:
+        raise MeshError(f"{name}: vertices must have shape (V, 3), got {v.shape}")
+    bad = ~np.isfinite(v).all(axis=1)
+    if bad.any():
+        first = np.flatnonzero(bad)[:5].tolist()
+        raise MeshError(
+            f"{name}: {int(bad.sum())} vertices have NaN/inf coordinates (first indices {first}); "
+            "fix or remove them before loading"
+        )
+    try:
+        f = np.asarray(faces)
+    except (TypeError, ValueError) as exc:
+        raise MeshError(f"{name}: faces are not an integer (F, 3) array ({exc})") from None
+    if f.size == 0:
+        raise MeshError(f"{name}: the mesh has no faces (a point cloud?); garsim needs a triangle mesh")
+    if f.dtype == object or f.ndim != 2:
+        raise MeshError(f"{name}: faces must be an (F, 3) integer array (mixed polygon sizes are not supported), got shape {f.shape}")
+    if not np.issubdtype(f.dtype, np.integer):
+        if not np.all(np.isfinite(f)) or not np.all(f == np.round(f)):
+            raise MeshError(f"{name}: face indices must be integers")
+    f = f.astype(np.int64)
+    if f.shape[1] < 3:
+        raise MeshError(f"{name}: faces must have at least 3 corners, got shape {f.shape}")
+    oob = (f < 0) | (f >= len(v))
+    if oob.any():
+        rows = np.flatnonzero(oob.any(axis=1))
+        raise MeshError(
+            f"{name}: {len(rows)} faces reference vertices outside [0, {len(v) - 1}] (first face {int(rows[0])}: "
+            f"{f[rows[0]].tolist()}); the face indices do not match the vertex list"
+        )
+    f = triangulate_polygons(f)
+    repeated = (f[:, 0] == f[:, 1]) | (f[:, 1] == f[:, 2]) | (f[:, 2] == f[:, 0])
+    if repeated.any():
+        rows = np.flatnonzero(repeated)
+        raise MeshError(
+            f"{name}: {len(rows)} degenerate faces repeat a vertex index (first face {int(rows[0])}: "
+            f"{f[rows[0]].tolist()}); remove them (e.g. trimesh's update_faces(nondegenerate_faces()))"
+        )
+    area2 = np.linalg.norm(np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]]), axis=1)
+    diag2 = float(np.sum((v.max(axis=0) - v.min(axis=0)) ** 2))
+    zero = area2 <= 2.0 * DEGENERATE_AREA_RTOL * max(diag2, 1e-30)
+    if zero.any():
+        rows = np.flatnonzero(zero)
+        raise MeshError(
+            f"{name}: {len(rows)} degenerate faces have zero area (first face {int(rows[0])}: "
+            f"{f[rows[0]].tolist()}); remove collapsed or collinear triangles"
+        )
+    return v.astype(np.float32), f
+
+
+def _check_path(path: str | os.PathLike, writing: bool) -> tuple[Path, str]:
+    p = Path(path)
+    ext = p.suffix.lower()
+    allowed = tuple(e for e in SUPPORTED_EXTENSIONS if not (writing and e == ".gltf"))
+    if ext not in allowed:
+        verb = "write" if writing else "read"
+        raise MeshError(f"{p}: cannot {verb} {ext or 'files without an extension'!r}; use one of {', '.join(allowed)}")
+    if not writing:
+        if not p.exists():
+            raise MeshError(f"{p}: no such file")
+        if p.is_dir():
+            raise MeshError(f"{p}: is a directory, expected a mesh file")
+        if p.stat().st_size == 0:
+            raise MeshError(f"{p}: the file is empty; re-export the mesh")
+    return p, ext
+
+
+def load_mesh(path: str | os.PathLike, y_up: bool = False) -> tuple[np.ndarray, np.ndarray]:
+    """Read a triangle mesh (OBJ/PLY/GLB/glTF/OFF/STL) in file order -> validated (vertices, faces).
+
+    ``y_up=True`` converts a Y-up file (glTF/Blender) to garsim's Z-up.
+    """
+    import trimesh
+
+    p, ext = _check_path(path, writing=False)
+    kwargs: dict[str, Any] = {"process": False}
+    if ext == ".obj":
+        kwargs.update(maintain_order=True, skip_materials=True)
+    try:
+        loaded = trimesh.load(str(p), force="mesh", **kwargs)
+    except Exception as exc:  # trimesh raises many types on malformed files
+        detail = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+        if isinstance(exc, IndexError):
+            detail += " (faces reference vertices that do not exist)"
+        raise MeshError(f"{p}: could not parse the {ext} file: {detail}") from None
+    vertices = np.asarray(getattr(loaded, "vertices", np.zeros((0, 3))))
+    faces = np.asarray(getattr(loaded, "faces", np.zeros((0, 3), dtype=np.int64)))
+    if len(faces) == 0:
+        raise MeshError(
+            f"{p}: no triangle faces found (the file has no vertices, or only points); garsim needs a triangle mesh"
+        )
+    if ext == ".stl" and len(faces):
+        # STL is a triangle soup: merge identical corners so the mesh is connected.
+        uniq, inverse = np.unique(vertices, axis=0, return_inverse=True)
+        first = np.full(len(uniq), len(vertices))
+        np.minimum.at(first, inverse.ravel(), np.arange(len(vertices)))
+        order = np.argsort(first)  # order of first appearance
+        rank = np.empty_like(order)
+        rank[order] = np.arange(len(order))
+        vertices, faces = uniq[order], rank[inverse.ravel()][faces]
+    v, f = validate_mesh(vertices, faces, name=str(p))
+    if y_up:
+        v = y_up_to_z_up(v)
+    return v, f
+
+
+def _as_rgba_uint8(colors: Any, n: int) -> np.ndarray:
+    c = np.asarray(colors)
+    if c.ndim == 1 and c.shape[0] in (3, 4):
+        c = np.broadcast_to(c, (n, c.shape[0]))
+    if c.ndim != 2 or c.shape[0] != n or c.shape[1] not in (3, 4):
+        raise MeshError(f"vertex_colors must have shape ({n}, 3) or ({n}, 4), got {c.shape}")
+    if np.issubdtype(c.dtype, np.floating):
+        if not np.isfinite(c).all() or c.min() < 0.0 or c.max() > 1.0:
+            raise MeshError("float vertex_colors must be finite and in [0, 1] (or pass uint8 in [0, 255])")
+        c = np.round(c * 255.0)
+    c = c.astype(np.uint8)
+    if c.shape[1] == 3:
+        c = np.concatenate([c, np.full((n, 1), 255, dtype=np.uint8)], axis=1)
+    return c
+
+
+def save_mesh(
+    path: str | os.PathLike,
+    vertices: np.ndarray,
+    faces: np.ndarray,
+    vertex_colors: np.ndarray | None = None,
+    y_up: bool = False,
+) -> Path:
+    """Write a validated mesh atomically (temp file + rename) in vertex order; returns the path.
+
+    ``vertex_colors``: (V, 3|4) floats in [0, 1] or uint8. ``y_up=True`` rotates Z-up -> Y-up.
+    """
+    import trimesh
+
+    p, ext = _check_path(path, writing=True)
+    v, f = validate_mesh(vertices, faces, name=str(p))
+    if y_up:
+        v = z_up_to_y_up(v)
+    mesh = trimesh.Trimesh(vertices=v.astype(np.float64), faces=f, process=False, validate=False)
+    if vertex_colors is not None:
+        mesh.visual = trimesh.visual.ColorVisuals(mesh=mesh, vertex_colors=_as_rgba_uint8(vertex_colors, len(v)))
+    export_kwargs: dict[str, Any] = {}
+    if ext == ".obj":
+        export_kwargs.update(include_normals=False, include_texture=False, digits=8)
+    data = mesh.export(file_type=ext[1:], **export_kwargs)
+    p.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{p.name}.", suffix=".tmp", dir=p.parent)
+    try:
+        with os.fdopen(fd, "wb") as fh:
+            fh.write(data.encode("utf-8") if isinstance(data, str) else data)
+        os.replace(tmp, p)
+    except BaseException:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+        raise
+    return p
+
+
+def as_mesh(obj: Any, name: str | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Validated (vertices, faces) from a path, a (vertices, faces) pair, or any object with ``.vertices``/``.faces``.
+
+    Accepts ``trimesh.Trimesh``, a ``trimesh.Scene`` (geometries concatenated), garsim's ``Garment``.
+    """
+    if isinstance(obj, (str, os.PathLike)):
+        return load_mesh(obj)
+    label = name or type(obj).__name__
+    try:
+        import trimesh
+
+        if isinstance(obj, trimesh.Scene):
+            obj = obj.to_mesh() if hasattr(obj, "to_mesh") else obj.dump(concatenate=True)
+    except ImportError:  # pragma: no cover - trimesh is a dependency
+        pass
+    if isinstance(obj, (tuple, list)):
+        if len(obj) != 2:
+            raise MeshError(f"{label}: expected a (vertices, faces) pair, got a sequence of length {len(obj)}")
+        return validate_mesh(obj[0], obj[1], name=name or "mesh")
+    if hasattr(obj, "vertices") and hasattr(obj, "faces"):
+        return validate_mesh(obj.vertices, obj.faces, name=label)
+    raise MeshError(
+        f"cannot read a mesh from a {type(obj).__name__}; pass a file path, a (vertices, faces) pair or a trimesh.Trimesh"
+    )

@@ -1,0 +1,164 @@
+"""Mesh I/O: vertex order survives round trips; every bad input gives a clear MeshError."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import trimesh
+
+from garsim.geometry.io import (
+    MeshError,
+    as_mesh,
+    load_mesh,
+    save_mesh,
+    triangulate_polygons,
+    validate_mesh,
+    y_up_to_z_up,
+    z_up_to_y_up,
+)
+
+
+@pytest.fixture
+def permuted(icosphere):
+    """The icosphere with randomly permuted vertex order (faces re-indexed to match)."""
+    v, f = icosphere
+    perm = np.random.default_rng(0).permutation(len(v))
+    inv = np.argsort(perm)
+    return v[perm], inv[f]
+
+
+@pytest.mark.parametrize("ext", [".obj", ".ply", ".glb", ".off"])
+def test_round_trip_keeps_vertex_order(tmp_path, permuted, ext):
+    v, f = permuted
+    path = save_mesh(tmp_path / f"m{ext}", v, f)
+    v2, f2 = load_mesh(path)
+    assert v2.dtype == np.float32 and f2.dtype == np.int64
+    np.testing.assert_allclose(v2, v, atol=1e-6)
+    np.testing.assert_array_equal(f2, f)
+
+
+def test_stl_is_merged_to_a_connected_mesh(tmp_path, icosphere):
+    v, f = icosphere
+    v2, f2 = load_mesh(save_mesh(tmp_path / "m.stl", v, f))
+    assert len(v2) == len(v) and len(f2) == len(f)
+    np.testing.assert_allclose(v2[f2], v[f], atol=1e-6)  # same triangles, same corner order
+
+
+def test_save_is_atomic_and_leaves_no_temp_files(tmp_path, icosphere):
+    v, f = icosphere
+    save_mesh(tmp_path / "a.obj", v, f)
+    save_mesh(tmp_path / "a.obj", v * 2, f)  # overwrite
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["a.obj"]
+    np.testing.assert_allclose(load_mesh(tmp_path / "a.obj")[0], v * 2, atol=1e-6)
+    with pytest.raises(MeshError, match="NaN"):
+        save_mesh(tmp_path / "a.obj", np.full_like(v, np.nan), f)
+    np.testing.assert_allclose(load_mesh(tmp_path / "a.obj")[0], v * 2, atol=1e-6)  # old file intact
+
+
+def test_vertex_colors_are_written(tmp_path, icosphere):
+    v, f = icosphere
+    colors = np.zeros((len(v), 3))
+    colors[:, 0] = 1.0
+    path = save_mesh(tmp_path / "c.ply", v, f, vertex_colors=colors)
+    loaded = trimesh.load(path, process=False)
+    np.testing.assert_array_equal(loaded.visual.vertex_colors[:, :3], np.tile([255, 0, 0], (len(v), 1)))
+    with pytest.raises(MeshError, match="vertex_colors"):
+        save_mesh(tmp_path / "c.ply", v, f, vertex_colors=np.zeros((3, 3)))
+
+
+def test_y_up_round_trip(tmp_path, permuted):
+    v, f = permuted
+    path = save_mesh(tmp_path / "y.glb", v, f, y_up=True)
+    raw = trimesh.load(path, process=False, force="mesh")
+    np.testing.assert_allclose(raw.vertices, np.stack([v[:, 0], v[:, 2], -v[:, 1]], 1), atol=1e-6)  # stored Y-up
+    v2, f2 = load_mesh(path, y_up=True)
+    np.testing.assert_allclose(v2, v, atol=1e-6)
+    np.testing.assert_array_equal(f2, f)
+    # up (+Z) becomes +Y and the body's front (-Y) becomes +Z (glTF's front)
+    np.testing.assert_allclose(z_up_to_y_up(np.array([[0, 0, 1.0], [0, -1.0, 0]])), [[0, 1, 0], [0, 0, 1]])
+    np.testing.assert_allclose(y_up_to_z_up(z_up_to_y_up(v)), v, atol=1e-7)
+
+
+def test_quad_obj_is_triangulated(tmp_path):
+    path = tmp_path / "quad.obj"
+    path.write_text("v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nv 0 0 1\nf 1 2 3 4\nf 1 2 5\n")
+    v, f = load_mesh(path)
+    assert v.shape == (5, 3) and f.shape == (3, 3)
+    areas = 0.5 * np.linalg.norm(np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]]), axis=1)
+    np.testing.assert_allclose(areas, [0.5, 0.5, 0.5])  # the unit quad became two halves
+    assert set(f[:2].ravel()) == {0, 1, 2, 3}
+
+
+def test_validate_fan_triangulates_polygon_arrays():
+    v = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], dtype=float)
+    np.testing.assert_array_equal(triangulate_polygons(np.array([[0, 1, 2, 3]])), [[0, 1, 2], [0, 2, 3]])
+    _, f = validate_mesh(v, [[0, 1, 2, 3]])
+    np.testing.assert_array_equal(f, [[0, 1, 2], [0, 2, 3]])
+
+
+OBJ_CASES = {
+    "empty": ("", "empty"),
+    "no vertices": ("# only a comment\n", "no triangle faces"),
+    "nan": ("v 0 0 0\nv 1 0 0\nv nan 1 0\nf 1 2 3\n", "NaN/inf"),
+    "inf": ("v 0 0 0\nv 1 0 inf\nv 0 1 0\nf 1 2 3\n", "NaN/inf"),
+    "out of range": ("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 7\n", "do not exist|outside"),
+    "repeated index": ("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\nf 1 2 2\n", "repeat a vertex"),
+    "zero area": ("v 0 0 0\nv 1 0 0\nv 2 0 0\nv 0 1 0\nf 1 2 3\nf 1 2 4\n", "zero area"),
+    "points only": ("v 0 0 0\nv 1 0 0\nv 0 1 0\n", "no triangle faces"),
+}
+
+
+@pytest.mark.parametrize("case", sorted(OBJ_CASES))
+def test_bad_obj_files_give_one_line_errors(tmp_path, case):
+    text, pattern = OBJ_CASES[case]
+    path = tmp_path / "bad.obj"
+    path.write_text(text)
+    with pytest.raises(MeshError, match=pattern) as err:
+        load_mesh(path)
+    msg = str(err.value)
+    assert "\n" not in msg and "bad.obj" in msg
+
+
+def test_missing_file_and_unsupported_extension(tmp_path, icosphere):
+    with pytest.raises(MeshError, match="no such file"):
+        load_mesh(tmp_path / "missing.obj")
+    (tmp_path / "m.xyz").write_text("1 2 3\n")
+    with pytest.raises(MeshError, match="use one of"):
+        load_mesh(tmp_path / "m.xyz")
+    with pytest.raises(MeshError, match="use one of"):
+        save_mesh(tmp_path / "m.fbx", *icosphere)
+    with pytest.raises(MeshError, match="directory"):
+        load_mesh(tmp_path.joinpath("d.obj").mkdir() or tmp_path / "d.obj")
+
+
+def test_validate_mesh_array_errors():
+    v = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0]], dtype=float)
+    with pytest.raises(MeshError, match="shape"):
+        validate_mesh(v[:, :2], [[0, 1, 2]])
+    with pytest.raises(MeshError, match="outside"):
+        validate_mesh(v, [[0, 1, -1]])
+    with pytest.raises(MeshError, match="no faces"):
+        validate_mesh(v, np.zeros((0, 3), dtype=int))
+    with pytest.raises(MeshError, match="integers"):
+        validate_mesh(v, [[0, 1, 1.5]])
+    with pytest.raises(MeshError, match="garment"):
+        validate_mesh(v, [[0, 1, 1]], name="garment")
+    assert issubclass(MeshError, ValueError)
+
+
+def test_as_mesh_accepts_trimesh_pairs_paths_and_objects(tmp_path, icosphere):
+    v, f = icosphere
+    tm = trimesh.Trimesh(v, f, process=False)
+    for obj in (tm, (v, f), [v.astype(np.float64), f.astype(np.int32)], save_mesh(tmp_path / "a.ply", v, f), str(tmp_path / "a.ply"), trimesh.Scene([tm])):
+        v2, f2 = as_mesh(obj)
+        np.testing.assert_allclose(v2, v, atol=1e-6)
+        np.testing.assert_array_equal(f2, f)
+
+    class Holder:
+        vertices, faces = v, f
+
+    np.testing.assert_array_equal(as_mesh(Holder())[1], f)
+    with pytest.raises(MeshError, match="cannot read a mesh"):
+        as_mesh(42)
+    with pytest.raises(MeshError, match="pair"):
+        as_mesh((v, f, f))

@@ -1,0 +1,110 @@
+"""Mesh connectivity and differential operators against hand-computed values."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from garsim.geometry.mesh import (
+    boundary_edges,
+    directed_edges,
+    face_areas,
+    face_normals,
+    face_pairs,
+    uniform_laplacian,
+    unique_edges,
+    vertex_normals,
+)
+
+# unit square in the z=0 plane split along the diagonal 0-2
+SQUARE_V = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], dtype=np.float64)
+SQUARE_F = np.array([[0, 1, 2], [0, 2, 3]])
+# right-angled tetrahedron, faces oriented outward
+TET_V = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]], dtype=np.float64)
+TET_F = np.array([[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]])
+
+
+def test_square_edges_pairs_boundary():
+    np.testing.assert_array_equal(unique_edges(SQUARE_F), [[0, 1], [0, 2], [0, 3], [1, 2], [2, 3]])
+    d = directed_edges(SQUARE_F)
+    assert d.shape == (2, 10)
+    assert {tuple(e) for e in d.T} == {(0, 1), (1, 0), (0, 2), (2, 0), (0, 3), (3, 0), (1, 2), (2, 1), (2, 3), (3, 2)}
+    np.testing.assert_array_equal(np.sort(face_pairs(SQUARE_F), axis=1), [[0, 1]])  # the two faces share the diagonal
+    np.testing.assert_array_equal(boundary_edges(SQUARE_F), [[0, 1], [0, 3], [1, 2], [2, 3]])
+
+
+def test_square_normals_and_areas():
+    np.testing.assert_allclose(face_normals(SQUARE_V, SQUARE_F), [[0, 0, 1], [0, 0, 1]])
+    np.testing.assert_allclose(face_normals(SQUARE_V, SQUARE_F, normalize=False), [[0, 0, 1], [0, 0, 1]])
+    np.testing.assert_allclose(face_areas(SQUARE_V, SQUARE_F), [0.5, 0.5])
+    np.testing.assert_allclose(vertex_normals(SQUARE_V, SQUARE_F), np.tile([0, 0, 1.0], (4, 1)))
+
+
+def test_square_laplacian_hand_computed():
+    lap = uniform_laplacian(SQUARE_F, 4).toarray()
+    expected = np.array(
+        [
+            [1, -1 / 3, -1 / 3, -1 / 3],  # vertex 0: neighbours 1, 2, 3
+            [-1 / 2, 1, -1 / 2, 0],  # vertex 1: neighbours 0, 2
+            [-1 / 3, -1 / 3, 1, -1 / 3],
+            [-1 / 2, 0, -1 / 2, 1],
+        ]
+    )
+    np.testing.assert_allclose(lap, expected)
+    # vertex 0 minus the mean of (1,0,0), (1,1,0), (0,1,0)
+    np.testing.assert_allclose((lap @ SQUARE_V)[0], [-2 / 3, -2 / 3, 0])
+
+
+def test_tetrahedron_closed_mesh():
+    assert len(unique_edges(TET_F)) == 6
+    assert len(face_pairs(TET_F)) == 6  # every edge is shared by two faces
+    assert len(boundary_edges(TET_F)) == 0
+    s3 = 1 / np.sqrt(3)
+    np.testing.assert_allclose(face_normals(TET_V, TET_F), [[0, 0, -1], [0, -1, 0], [-1, 0, 0], [s3, s3, s3]], atol=1e-12)
+    np.testing.assert_allclose(face_areas(TET_V, TET_F), [0.5, 0.5, 0.5, np.sqrt(3) / 2])
+    vn = vertex_normals(TET_V, TET_F)
+    np.testing.assert_allclose(vn[0], [-s3, -s3, -s3])  # equal-area faces (0,0,-1), (0,-1,0), (-1,0,0)
+    # vertex 1: area-weighted (0,0,-1)/2 + (0,-1,0)/2 + (1,1,1)/2 = (1/2, 0, 0)
+    np.testing.assert_allclose(vn[1], [1.0, 0.0, 0.0], atol=1e-12)
+    pairs = {tuple(p) for p in np.sort(face_pairs(TET_F), axis=1)}
+    assert pairs == {(0, 1), (0, 2), (0, 3), (1, 2), (1, 3), (2, 3)}
+    lap = uniform_laplacian(TET_F, 4)
+    np.testing.assert_allclose((lap @ TET_V)[0], [-1 / 3, -1 / 3, -1 / 3])
+    np.testing.assert_allclose(np.asarray(lap.sum(axis=1)).ravel(), 0.0, atol=1e-12)
+
+
+def _grid(n: int) -> tuple[np.ndarray, np.ndarray]:
+    """n x n vertex grid on [0, 1]^2, each cell split along the same diagonal."""
+    xs, ys = np.meshgrid(np.linspace(0, 1, n), np.linspace(0, 1, n), indexing="xy")
+    v = np.stack([xs.ravel(), ys.ravel(), np.zeros(n * n)], axis=1)
+    i, j = np.meshgrid(np.arange(n - 1), np.arange(n - 1), indexing="xy")
+    a = (j * n + i).ravel()
+    f = np.concatenate([np.stack([a, a + 1, a + n + 1], 1), np.stack([a, a + n + 1, a + n], 1)])
+    return v, f
+
+
+def test_laplacian_of_a_tilted_plane_vanishes_in_the_interior():
+    v, f = _grid(6)
+    v[:, 2] = 0.3 * v[:, 0] - 0.7 * v[:, 1] + 0.2  # a tilted plane: linear coordinates
+    lap = uniform_laplacian(f, len(v))
+    np.testing.assert_allclose(np.asarray(lap.sum(axis=1)).ravel(), 0.0, atol=1e-12)
+    interior = np.ones(len(v), dtype=bool)
+    interior[np.unique(boundary_edges(f))] = False
+    assert interior.sum() == 16
+    np.testing.assert_allclose((lap @ v)[interior], 0.0, atol=1e-12)
+    assert np.abs((lap @ v)[~interior]).max() > 1e-3  # border vertices are not at their neighbours' mean
+
+
+def test_vertex_normals_of_a_sphere_point_outward(icosphere):
+    v, f = icosphere
+    vn = vertex_normals(v, f)
+    np.testing.assert_allclose(np.linalg.norm(vn, axis=1), 1.0, atol=1e-5)
+    assert np.einsum("ij,ij->i", vn, v / np.linalg.norm(v, axis=1, keepdims=True)).min() > 0.99
+    assert len(face_pairs(f)) == len(unique_edges(f)) == 3 * len(f) // 2
+
+
+@pytest.mark.parametrize("faces", [SQUARE_F, TET_F])
+def test_directed_edges_are_symmetric(faces):
+    d = directed_edges(faces)
+    fwd = {tuple(e) for e in d.T}
+    assert fwd == {(b, a) for a, b in fwd}
