@@ -1,0 +1,104 @@
+"""GarSimConfig: every hyperparameter of the model (inputs, encoders, processor, decoder), JSON round-trip."""
+
+from __future__ import annotations
+
+import json
+from dataclasses import asdict, dataclass, fields
+from pathlib import Path
+from typing import Any
+
+HEADS: tuple[str, ...] = ("direction_magnitude", "displacement", "position")
+SEMANTIC_MODES: tuple[str, ...] = ("grid", "vertex")
+
+
+@dataclass
+class GarSimConfig:
+    """Hyperparameters of GarSim; saved next to the weights as JSON.
+
+    Inputs: ``knn_garment`` / ``knn_body`` neighbourhood sizes of the geometry encoder;
+    ``canonicalize_yaw`` expresses every vector in a frame fixed to the canonical body's
+    heading (exact equivariance to rotations about the vertical axis); ``semantic`` picks
+    the body-semantic input: ``"grid"`` (the binary mask over body vertices splatted onto a
+    fixed body-normalised grid of ``semantic_grid`` cells, any body topology) or
+    ``"vertex"`` (the paper's binary vector over ``num_body_vertices`` body vertices).
+    """
+
+    # inputs (Eq. 2)
+    knn_garment: int = 8
+    knn_body: int = 8
+    canonicalize_yaw: bool = True
+    semantic: str = "grid"
+    semantic_grid: tuple[int, int, int] = (8, 4, 16)
+    num_body_vertices: int | None = None
+    pos_scale: float = 10.0  # metres -> network units (decimetres) for every geometric input
+    # encoders
+    geo_hidden: int = 32
+    geo_out: int = 32
+    semantic_dim: int = 32
+    latent: int = 64  # node latent size (η, χ, μ)
+    edge_latent: int = 32  # edge latent size (π); edges outnumber nodes ~6:1, so they are kept narrower
+    mlp_hidden: int = 64
+    mlp_layers: int = 1  # hidden layers per MLP
+    activation: str = "silu"
+    # processor (Algorithm 1)
+    num_steps: int = 5
+    aggregation: str = "mean"
+    share_weights: bool = False
+    residual: bool = True
+    layer_norm: bool = True
+    # decoder
+    head: str = "direction_magnitude"
+    magnitude_bias_init: float = -3.0
+
+    def __post_init__(self) -> None:
+        self.semantic_grid = tuple(int(v) for v in self.semantic_grid)  # type: ignore[assignment]
+        if self.head not in HEADS:
+            raise ValueError(f"unknown head {self.head!r}; choose one of {HEADS}")
+        if self.semantic not in SEMANTIC_MODES:
+            raise ValueError(f"unknown semantic mode {self.semantic!r}; choose one of {SEMANTIC_MODES}")
+        if self.semantic == "vertex" and not self.num_body_vertices:
+            raise ValueError("semantic='vertex' needs num_body_vertices (the body topology's vertex count)")
+        if len(self.semantic_grid) != 3 or min(self.semantic_grid) < 2:
+            raise ValueError(f"semantic_grid must be 3 sizes >= 2, got {self.semantic_grid}")
+        for name in ("knn_garment", "knn_body", "latent", "edge_latent", "mlp_hidden", "geo_hidden", "geo_out", "semantic_dim"):
+            if int(getattr(self, name)) < 1:
+                raise ValueError(f"{name} must be >= 1, got {getattr(self, name)}")
+        if self.num_steps < 0:
+            raise ValueError(f"num_steps must be >= 0, got {self.num_steps}")
+
+    @property
+    def semantic_input_dim(self) -> int:
+        """Length of the body-semantic input vector."""
+        if self.semantic == "vertex":
+            return int(self.num_body_vertices)  # type: ignore[arg-type]
+        gx, gy, gz = self.semantic_grid
+        return gx * gy * gz
+
+    def to_dict(self) -> dict[str, Any]:
+        """Plain-JSON dict (tuples become lists)."""
+        d = asdict(self)
+        d["semantic_grid"] = list(self.semantic_grid)
+        return d
+
+    @classmethod
+    def from_dict(cls, d: dict[str, Any]) -> "GarSimConfig":
+        """Inverse of ``to_dict``; unknown keys are an error."""
+        known = {f.name for f in fields(cls)}
+        unknown = set(d) - known
+        if unknown:
+            raise ValueError(f"unknown GarSimConfig keys {sorted(unknown)}; known keys: {sorted(known)}")
+        return cls(**d)
+
+    def to_json(self, path: str | Path | None = None) -> str:
+        """Serialise to JSON text, also writing ``path`` when given."""
+        text = json.dumps(self.to_dict(), indent=2, sort_keys=True)
+        if path is not None:
+            Path(path).write_text(text)
+        return text
+
+    @classmethod
+    def from_json(cls, text_or_path: str | Path) -> "GarSimConfig":
+        """Read from JSON text or a path to a JSON file."""
+        p = Path(text_or_path) if not str(text_or_path).lstrip().startswith("{") else None
+        text = p.read_text() if p is not None else str(text_or_path)
+        return cls.from_dict(json.loads(text))

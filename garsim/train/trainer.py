@@ -1,0 +1,369 @@
+"""Training loop for GarSim: AdamW + warmup/cosine schedule + gradient clipping, per-epoch validation in mm,
+safetensors checkpoints with resume, tqdm progress, CSV log, seeded determinism, a NaN guard, and DDP
+(``torchrun --nproc_per_node=2 ...`` on CPU with gloo).
+
+The collision term of Eq. 7 is switched on after the other losses converge (paper Sec. 5):
+at ``collision_start_epoch`` if set, or once the validation error has not improved by
+``collision_min_delta`` (relative) for ``collision_patience`` epochs.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import math
+import os
+import random
+import time
+from collections.abc import Iterable, Sequence
+from dataclasses import asdict, dataclass, field, fields
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+import torch.distributed as dist
+from safetensors.torch import load_file, save_file
+from torch.utils.data import DataLoader, Dataset
+from torch.utils.data.distributed import DistributedSampler
+
+from garsim.data.sample import Sample
+from garsim.model.config import GarSimConfig
+from garsim.model.garsim import GarSimModel, _atomic
+from garsim.model.inputs import GarmentGraph, build_graph, collate
+from garsim.train.losses import LossWeights, euclidean_error_mm, garsim_loss
+
+CSV_FIELDS = ("epoch", "step", "lr", "train_loss", "train_l2_mm", "val_err_mm", "val_prior_mm", "collision", "seconds")
+
+
+class NonFiniteLossError(RuntimeError):
+    """Raised when a loss becomes NaN/inf; the message names the offending samples."""
+
+
+@dataclass
+class TrainConfig:
+    """Hyperparameters of a training run (saved as JSON in the run directory)."""
+
+    out_dir: str = "runs/garsim"
+    epochs: int = 50
+    batch_size: int = 4
+    lr: float = 1e-3
+    min_lr_ratio: float = 0.05  # cosine decays to lr * min_lr_ratio
+    warmup_steps: int = 50
+    weight_decay: float = 1e-4
+    grad_clip: float = 1.0
+    seed: int = 0
+    collision_start_epoch: int | None = None
+    collision_patience: int = 3
+    collision_min_delta: float = 0.01
+    losses: LossWeights = field(default_factory=LossWeights)
+    progress: bool = True
+    resume: bool = True
+    checkpoint_every: int = 1  # epochs
+    max_steps_per_epoch: int | None = None  # for smoke tests
+
+    def to_dict(self) -> dict[str, Any]:
+        """Plain JSON dict."""
+        return asdict(self)
+
+    @classmethod
+    def from_dict(cls, d: dict[str, Any]) -> "TrainConfig":
+        """Inverse of ``to_dict``; unknown keys are an error."""
+        known = {f.name for f in fields(cls)}
+        unknown = set(d) - known
+        if unknown:
+            raise ValueError(f"unknown TrainConfig keys {sorted(unknown)}; known keys: {sorted(known)}")
+        d = dict(d)
+        if isinstance(d.get("losses"), dict):
+            d["losses"] = LossWeights(**d["losses"])
+        return cls(**d)
+
+
+class GraphDataset(Dataset):
+    """Samples (a list, any sequence such as an on-disk store, or an iterable) -> cached GarmentGraphs."""
+
+    def __init__(self, samples: Sequence[Sample] | Iterable[Sample], config: GarSimConfig, with_collision: bool = True, cache: bool = True):
+        if not (hasattr(samples, "__len__") and hasattr(samples, "__getitem__")):
+            samples = list(samples)
+        if len(samples) == 0:
+            raise ValueError("the dataset is empty: pass at least one Sample")
+        self.samples = samples
+        self.config = config
+        self.with_collision = with_collision
+        self.cache = cache
+        self._graphs: dict[int, GarmentGraph] = {}
+
+    def __len__(self) -> int:
+        return len(self.samples)
+
+    def __getitem__(self, i: int) -> GarmentGraph:
+        g = self._graphs.get(i)
+        if g is None:
+            s = self.samples[i]
+            if s.target is None:
+                raise ValueError(f"sample {i} ({s.meta.get('name', '')}) has no target: training needs ground truth")
+            g = build_graph(s, self.config, with_collision=self.with_collision, name=str(s.meta.get("name") or f"sample{i}"))
+            if self.cache:
+                self._graphs[i] = g
+        return g
+
+
+def seed_everything(seed: int) -> None:
+    """Seed Python, NumPy and torch; make torch deterministic."""
+    random.seed(seed)
+    np.random.seed(seed)
+    torch.manual_seed(seed)
+    torch.use_deterministic_algorithms(True, warn_only=True)
+
+
+def _dist_info() -> tuple[int, int]:
+    if dist.is_available() and dist.is_initialized():
+        return dist.get_rank(), dist.get_world_size()
+    return 0, 1
+
+
+def init_distributed() -> tuple[int, int]:
+    """Join the process group when launched by torchrun (WORLD_SIZE > 1); gloo on CPU. Returns (rank, world)."""
+    if int(os.environ.get("WORLD_SIZE", "1")) > 1 and dist.is_available() and not dist.is_initialized():
+        dist.init_process_group(backend="gloo")
+    return _dist_info()
+
+
+class Trainer:
+    """Trains a GarSimModel on Samples; rank 0 writes checkpoints, the CSV log and the best model."""
+
+    def __init__(
+        self,
+        model_config: GarSimConfig,
+        train_config: TrainConfig,
+        train_samples: Sequence[Sample] | Iterable[Sample],
+        val_samples: Sequence[Sample] | Iterable[Sample] | None = None,
+    ):
+        self.cfg = train_config
+        self.model_config = model_config
+        self.rank, self.world = init_distributed()
+        seed_everything(train_config.seed)
+        self.model = GarSimModel(model_config)
+        self.train_set = GraphDataset(train_samples, model_config, with_collision=True)
+        self.val_set = GraphDataset(val_samples, model_config, with_collision=False) if val_samples is not None else None
+        self.net: torch.nn.Module = self.model
+        if self.world > 1:
+            self.net = torch.nn.parallel.DistributedDataParallel(self.model)
+        self.optimizer = torch.optim.AdamW(self.model.parameters(), lr=train_config.lr, weight_decay=train_config.weight_decay)
+        self.out = Path(train_config.out_dir)
+        self.epoch = 0
+        self.step = 0
+        self.collision_on = train_config.collision_start_epoch == 0
+        self.best_val = math.inf
+        self.best_epoch = -1
+        self.history: list[dict[str, Any]] = []
+        if self.rank == 0:
+            self.out.mkdir(parents=True, exist_ok=True)
+            (self.out / "train_config.json").write_text(json.dumps(train_config.to_dict(), indent=2))
+        if train_config.resume and (self.out / "checkpoint" / "trainer_state.json").exists():
+            self.load_checkpoint(self.out / "checkpoint")
+
+    # -- schedule ---------------------------------------------------------------------------
+    def steps_per_epoch(self) -> int:
+        """Optimizer steps per epoch on this rank."""
+        n = math.ceil(len(self.train_set) / self.world)
+        steps = math.ceil(n / self.cfg.batch_size)
+        return min(steps, self.cfg.max_steps_per_epoch) if self.cfg.max_steps_per_epoch else steps
+
+    def lr_at(self, step: int) -> float:
+        """Linear warmup then cosine decay to lr * min_lr_ratio over all epochs."""
+        total = max(1, self.cfg.epochs * self.steps_per_epoch())
+        if step < self.cfg.warmup_steps:
+            return self.cfg.lr * (step + 1) / self.cfg.warmup_steps
+        t = min(1.0, (step - self.cfg.warmup_steps) / max(1, total - self.cfg.warmup_steps))
+        lo = self.cfg.lr * self.cfg.min_lr_ratio
+        return lo + 0.5 * (self.cfg.lr - lo) * (1.0 + math.cos(math.pi * t))
+
+    # -- loops ------------------------------------------------------------------------------
+    def _loader(self, epoch: int) -> DataLoader:
+        if self.world > 1:
+            sampler = DistributedSampler(self.train_set, num_replicas=self.world, rank=self.rank, shuffle=True, seed=self.cfg.seed)
+            sampler.set_epoch(epoch)
+            return DataLoader(self.train_set, batch_size=self.cfg.batch_size, sampler=sampler, collate_fn=collate)
+        gen = torch.Generator().manual_seed(self.cfg.seed * 1000003 + epoch)
+        return DataLoader(self.train_set, batch_size=self.cfg.batch_size, shuffle=True, generator=gen, collate_fn=collate)
+
+    def _check_finite(self, terms: dict[str, torch.Tensor], batch) -> None:
+        bad = ~torch.isfinite(terms["total"].detach())
+        flag = torch.tensor([float(bad.any())])
+        if self.world > 1:
+            dist.all_reduce(flag, op=dist.ReduceOp.MAX)
+        if flag.item() > 0:
+            names = [batch.name[i] for i in torch.nonzero(bad).ravel().tolist()] if bad.any() else []
+            where = f"samples {names}" if names else "a sample on another rank"
+            raise NonFiniteLossError(
+                f"non-finite loss at epoch {self.epoch} step {self.step} (rank {self.rank}) on {where}; "
+                f"terms: { {k: v.detach().tolist() for k, v in terms.items()} }"
+            )
+
+    def train_epoch(self) -> dict[str, float]:
+        """One pass over the training set; returns mean loss and mean L2 (mm)."""
+        self.net.train()
+        loader = self._loader(self.epoch)
+        limit = self.steps_per_epoch()
+        bar = None
+        if self.cfg.progress and self.rank == 0:
+            from tqdm.auto import tqdm
+
+            bar = tqdm(total=limit, desc=f"epoch {self.epoch + 1}/{self.cfg.epochs}", leave=False)
+        sums, count = {"loss": 0.0, "l2": 0.0}, 0
+        for i, batch in enumerate(loader):
+            if i >= limit:
+                break
+            lr = self.lr_at(self.step)
+            for g in self.optimizer.param_groups:
+                g["lr"] = lr
+            pred = self.net(batch)
+            loss, terms = garsim_loss(pred, batch, self.cfg.losses, use_collision=self.collision_on)
+            self._check_finite(terms, batch)
+            self.optimizer.zero_grad(set_to_none=True)
+            loss.backward()
+            if self.cfg.grad_clip > 0:
+                torch.nn.utils.clip_grad_norm_(self.model.parameters(), self.cfg.grad_clip)
+            self.optimizer.step()
+            self.step += 1
+            sums["loss"] += float(loss.detach())
+            sums["l2"] += float(terms["l2"].mean()) * 1000.0
+            count += 1
+            if bar is not None:
+                bar.update(1)
+                bar.set_postfix(loss=f"{float(loss.detach()):.4g}", lr=f"{lr:.2e}")
+        if bar is not None:
+            bar.close()
+        stats = torch.tensor([sums["loss"], sums["l2"], float(count)], dtype=torch.float64)
+        if self.world > 1:
+            dist.all_reduce(stats)
+        n = max(stats[2].item(), 1.0)
+        return {"train_loss": stats[0].item() / n, "train_l2_mm": stats[1].item() / n}
+
+    @torch.no_grad()
+    def validate(self) -> dict[str, float]:
+        """Mean Euclidean error (mm) of the model and of the LBS prior on the validation set (all ranks)."""
+        if self.val_set is None:
+            return {"val_err_mm": float("nan"), "val_prior_mm": float("nan")}
+        self.model.eval()
+        idx = list(range(self.rank, len(self.val_set), self.world))
+        sums = torch.zeros(3, dtype=torch.float64)
+        for start in range(0, len(idx), self.cfg.batch_size):
+            batch = collate([self.val_set[i] for i in idx[start : start + self.cfg.batch_size]])
+            pred = self.model(batch)
+            sums[0] += euclidean_error_mm(pred, batch.target, batch).sum().item()
+            sums[1] += euclidean_error_mm(batch.prior, batch.target, batch).sum().item()
+            sums[2] += batch.num_graphs
+        if self.world > 1:
+            dist.all_reduce(sums)
+        n = max(sums[2].item(), 1.0)
+        return {"val_err_mm": sums[0].item() / n, "val_prior_mm": sums[1].item() / n}
+
+    def _update_collision_switch(self) -> None:
+        if self.collision_on:
+            return
+        start = self.cfg.collision_start_epoch
+        if start is not None:
+            self.collision_on = self.epoch >= start
+        elif self.best_epoch >= 0 and self.epoch - self.best_epoch >= self.cfg.collision_patience:
+            self.collision_on = True
+
+    def fit(self) -> list[dict[str, Any]]:
+        """Train for the configured epochs (continuing a resumed run); returns the per-epoch history."""
+        while self.epoch < self.cfg.epochs:
+            t0 = time.perf_counter()
+            train = self.train_epoch()
+            val = self.validate()
+            self.epoch += 1
+            metric = val["val_err_mm"] if math.isfinite(val["val_err_mm"]) else train["train_l2_mm"]
+            if metric < self.best_val:
+                if self.best_epoch < 0 or metric < self.best_val * (1.0 - self.cfg.collision_min_delta):
+                    self.best_epoch = self.epoch  # last significant improvement (plateau detection)
+                self.best_val = metric
+                if self.rank == 0:
+                    self.model.save(self.out / "best")
+            self._update_collision_switch()
+            row = {
+                "epoch": self.epoch,
+                "step": self.step,
+                "lr": self.lr_at(self.step),
+                **train,
+                **val,
+                "collision": int(self.collision_on),
+                "seconds": time.perf_counter() - t0,
+            }
+            self.history.append(row)
+            if self.rank == 0:
+                self._log(row)
+                if self.epoch % self.cfg.checkpoint_every == 0 or self.epoch == self.cfg.epochs:
+                    self.save_checkpoint(self.out / "checkpoint")
+        if self.world > 1:
+            dist.barrier()
+        return self.history
+
+    def _log(self, row: dict[str, Any]) -> None:
+        path = self.out / "log.csv"
+        new = not path.exists()
+        with path.open("a", newline="") as f:
+            w = csv.DictWriter(f, fieldnames=CSV_FIELDS)
+            if new:
+                w.writeheader()
+            w.writerow({k: row[k] for k in CSV_FIELDS})
+
+    # -- checkpoints ------------------------------------------------------------------------
+    def save_checkpoint(self, directory: str | Path) -> Path:
+        """Model (safetensors + config), optimizer tensors (safetensors), RNG and trainer state (JSON)."""
+        d = Path(directory)
+        self.model.save(d)
+        opt = self.optimizer.state_dict()
+        tensors: dict[str, torch.Tensor] = {}
+        scalars: dict[str, Any] = {}
+        for pid, st in opt["state"].items():
+            for key, val in st.items():
+                if torch.is_tensor(val):
+                    tensors[f"state.{pid}.{key}"] = val.detach().contiguous().cpu()
+                else:
+                    scalars[f"state.{pid}.{key}"] = val
+        tensors["rng.torch"] = torch.get_rng_state()
+        _atomic(d / "optimizer.safetensors", lambda p: save_file(tensors, str(p)))
+        state = {
+            "epoch": self.epoch,
+            "step": self.step,
+            "collision_on": self.collision_on,
+            "best_val": self.best_val if math.isfinite(self.best_val) else None,
+            "best_epoch": self.best_epoch,
+            "param_groups": opt["param_groups"],
+            "optimizer_scalars": scalars,
+            "history": self.history,
+            "train_config": self.cfg.to_dict(),
+        }
+        _atomic(d / "trainer_state.json", lambda p: Path(p).write_text(json.dumps(state, indent=1)))
+        return d
+
+    def load_checkpoint(self, directory: str | Path) -> None:
+        """Resume from ``save_checkpoint`` output (no pickle involved)."""
+        d = Path(directory)
+        state = json.loads((d / "trainer_state.json").read_text())
+        loaded = GarSimModel.load(d)
+        if loaded.config != self.model_config:
+            raise ValueError(f"checkpoint {d} was trained with another model config; use a new out_dir or the same config")
+        self.model.load_state_dict(loaded.state_dict())
+        tensors = load_file(str(d / "optimizer.safetensors"))
+        opt_state: dict[int, dict[str, Any]] = {}
+        for key, val in tensors.items():
+            if key.startswith("state."):
+                _, pid, name = key.split(".", 2)
+                opt_state.setdefault(int(pid), {})[name] = val
+        for key, val in state.get("optimizer_scalars", {}).items():
+            _, pid, name = key.split(".", 2)
+            opt_state.setdefault(int(pid), {})[name] = val
+        self.optimizer.load_state_dict({"state": opt_state, "param_groups": state["param_groups"]})
+        if "rng.torch" in tensors:
+            torch.set_rng_state(tensors["rng.torch"])
+        self.epoch = int(state["epoch"])
+        self.step = int(state["step"])
+        self.collision_on = bool(state["collision_on"])
+        self.best_val = math.inf if state["best_val"] is None else float(state["best_val"])
+        self.best_epoch = int(state["best_epoch"])
+        self.history = list(state.get("history", []))
