@@ -1,0 +1,460 @@
+"""Pose library for Anny: a random pose sampler with joint limits, slerp sequences, a walk cycle.
+
+Poses are dicts ``bone name -> axis-angle`` in Anny's ``local-ref`` parameterisation: each
+rotation is expressed in world-aligned axes (X: the body's right -> left, Y: front -> back, the
+body faces -Y, Z: up) at the bone's head, and is composed after the parent's rotation (a child's
+world rotation is ``G_child = G_parent @ R_child``). Poses are absolute: the canonical T-pose is
+``AnnyBody.t_pose()`` (upper arms rotated 40 deg about Y from Anny's rest A-pose), and the shoulder
+angles below are measured from it.
+
+Sign conventions (verified by posing Anny and watching where vertices go, see the tests):
+
+* hip flexion brings the knee forward (-Y): ``Rx(-flexion)``; abduction moves the knee away from
+  the body's midline; external rotation turns the toes outwards.
+* knee flexion moves the foot backwards (+Y), about the lower-leg bone's hinge (X) axis.
+* spine flexion bends forwards (+X rotation moves the head to -Y), spread evenly over spine01..05;
+  lateral bend > 0 leans to the body's left (+X); twist > 0 turns the chest anticlockwise seen
+  from above (+Z).
+* shoulder elevation > 0 raises the arm above the T-pose, < 0 lowers it towards the hips;
+  shoulder flexion > 0 swings the arm forwards (-Y); twist rotates about the arm's long axis.
+* elbow flexion > 0 folds the forearm towards the upper arm about the forearm bone's hinge (X)
+  axis, measured from Anny's rest bend (~43 deg).
+
+The right side mirrors the left (axis-angle ``(x, y, z) -> (x, -y, -z)``).
+"""
+
+from __future__ import annotations
+
+import math
+import re
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, fields
+
+import numpy as np
+import roma
+import torch
+from scipy.spatial import cKDTree
+
+from garsim.bodies.anny import T_POSE_ARM_DEGREES, AnnyBody
+
+SPINE_BONES: tuple[str, ...] = ("spine05", "spine04", "spine03", "spine02", "spine01")
+"""Spine bones from the pelvis up; spine angles are split evenly over them."""
+
+POSED_BONES: tuple[str, ...] = (
+    "upperleg01.L", "upperleg01.R", "lowerleg01.L", "lowerleg01.R", *SPINE_BONES,
+    "upperarm01.L", "upperarm01.R", "lowerarm01.L", "lowerarm01.R", "neck01",
+)  # fmt: skip
+"""Every bone a sampled or walk pose sets."""
+
+# Hinge axes (rest-pose world coordinates) of the left knee and elbow: the X column of Anny's rest
+# bone frames for the default phenotype. ``hinge_axes(body)`` reads them from a given body instead.
+DEFAULT_KNEE_AXIS_L = (0.995, -0.011, 0.102)
+DEFAULT_ELBOW_AXIS_L = (-0.750, -0.068, -0.658)
+
+_MIRROR = np.array([1.0, -1.0, -1.0])
+
+
+@dataclass(frozen=True)
+class JointLimits:
+    """Per degree of freedom (low, high) ranges in degrees; sides share limits (mirrored)."""
+
+    hip_flexion: tuple[float, float] = (-15.0, 85.0)
+    hip_abduction: tuple[float, float] = (-8.0, 40.0)
+    hip_rotation: tuple[float, float] = (-30.0, 30.0)
+    knee_flexion: tuple[float, float] = (0.0, 110.0)
+    spine_flexion: tuple[float, float] = (-15.0, 40.0)
+    spine_lateral: tuple[float, float] = (-20.0, 20.0)
+    spine_twist: tuple[float, float] = (-30.0, 30.0)
+    shoulder_elevation: tuple[float, float] = (-80.0, 40.0)
+    shoulder_flexion: tuple[float, float] = (-30.0, 90.0)
+    shoulder_twist: tuple[float, float] = (-45.0, 45.0)
+    elbow_flexion: tuple[float, float] = (-35.0, 100.0)
+    neck_flexion: tuple[float, float] = (-20.0, 30.0)
+    neck_lateral: tuple[float, float] = (-20.0, 20.0)
+    neck_twist: tuple[float, float] = (-40.0, 40.0)
+
+    def __post_init__(self) -> None:
+        for f in fields(self):
+            lo, hi = getattr(self, f.name)
+            if not (math.isfinite(lo) and math.isfinite(hi) and lo <= hi and max(abs(lo), abs(hi)) <= 180.0):
+                raise ValueError(f"joint limit {f.name}=({lo}, {hi}) must be finite degrees with low <= high, |.| <= 180")
+
+
+SIDED_DOFS: tuple[str, ...] = (
+    "hip_flexion", "hip_abduction", "hip_rotation", "knee_flexion",
+    "shoulder_elevation", "shoulder_flexion", "shoulder_twist", "elbow_flexion",
+)  # fmt: skip
+"""Degrees of freedom sampled independently for the left (``_L``) and right (``_R``) side."""
+
+CENTRAL_DOFS: tuple[str, ...] = ("spine_flexion", "spine_lateral", "spine_twist", "neck_flexion", "neck_lateral", "neck_twist")
+
+
+def angle_names() -> tuple[str, ...]:
+    """Names of the sampled joint angles, e.g. ``hip_flexion_L`` and ``spine_twist``."""
+    return tuple(f"{d}_{s}" for d in SIDED_DOFS for s in "LR") + CENTRAL_DOFS
+
+
+def limit_of(limits: JointLimits, angle_name: str) -> tuple[float, float]:
+    """The (low, high) range in degrees of one angle name (``hip_flexion_L`` -> ``limits.hip_flexion``)."""
+    return getattr(limits, re.sub(r"_[LR]$", "", angle_name))
+
+
+@dataclass(frozen=True)
+class HingeAxes:
+    """Rest-pose world axes of the left knee and elbow hinges (unit vectors; the right side mirrors)."""
+
+    knee_l: tuple[float, float, float] = DEFAULT_KNEE_AXIS_L
+    elbow_l: tuple[float, float, float] = DEFAULT_ELBOW_AXIS_L
+
+
+def hinge_axes(body: AnnyBody) -> HingeAxes:
+    """The knee/elbow hinge axes of ``body``: the X column of Anny's rest bone frames (phenotype-dependent)."""
+    with torch.no_grad():
+        rest = body._run(None)["rest_bone_poses"][0].numpy()
+
+    def axis(name: str) -> tuple[float, float, float]:
+        a = rest[body.bone_index(name), :3, 0]
+        return tuple(float(x) for x in a / np.linalg.norm(a))
+
+    return HingeAxes(knee_l=axis("lowerleg01.L"), elbow_l=axis("lowerarm01.L"))
+
+
+# -- angles <-> poses ----------------------------------------------------------------------------
+def sample_joint_angles(rng: np.random.Generator, n: int, limits: JointLimits | None = None) -> dict[str, np.ndarray]:
+    """``n`` sets of joint angles in degrees, uniform within ``limits``: name -> (n,) array."""
+    limits = limits or JointLimits()
+    return {name: rng.uniform(*limit_of(limits, name), size=n) for name in angle_names()}
+
+
+def _rot(axis: Sequence[float], degrees: np.ndarray) -> torch.Tensor:
+    """(n, 3, 3) rotations about a fixed unit ``axis`` by ``degrees`` (n,)."""
+    a = torch.as_tensor(np.asarray(axis, dtype=np.float64))
+    a = a / torch.linalg.norm(a)
+    angles = torch.as_tensor(np.radians(np.asarray(degrees, dtype=np.float64)))
+    return roma.rotvec_to_rotmat(angles[:, None] * a[None, :])
+
+
+def _compose(*mats: torch.Tensor) -> np.ndarray:
+    """Product of (n, 3, 3) rotations (leftmost applied last) -> (n, 3) axis-angle."""
+    return roma.rotmat_to_rotvec(roma.rotmat_composition(list(mats)) if len(mats) > 1 else mats[0]).numpy()
+
+
+X, Y, Z = (1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, 0.0, 1.0)
+
+
+def angles_to_pose(angles: Mapping[str, np.ndarray | float], axes: HingeAxes | None = None) -> dict[str, np.ndarray]:
+    """Joint angles in degrees (name -> (n,) or scalar; missing angles are 0) -> pose dict of (n, 3) axis-angles."""
+    axes = axes or HingeAxes()
+    unknown = set(angles) - set(angle_names())
+    if unknown:
+        raise ValueError(f"unknown joint angles {sorted(unknown)}; valid names: {angle_names()}")
+    arrays = {k: np.atleast_1d(np.asarray(v, dtype=np.float64)) for k, v in angles.items()}
+    n = max((len(v) for v in arrays.values()), default=1)
+    get = {name: np.broadcast_to(arrays.get(name, np.zeros(1)), (n,)) for name in angle_names()}
+    pose: dict[str, np.ndarray] = {}
+    t_pose_deg = np.full(n, T_POSE_ARM_DEGREES)
+    for side in "LR":
+        mirror = _MIRROR if side == "R" else np.ones(3)
+
+        def left(rotvec: np.ndarray) -> np.ndarray:
+            return rotvec * mirror  # a left-side rotation vector, mirrored to the right side
+
+        a = lambda dof: get[f"{dof}_{side}"]  # noqa: E731
+        hip = _compose(_rot(X, -a("hip_flexion")), _rot(Y, -a("hip_abduction")), _rot(Z, a("hip_rotation")))
+        knee = _compose(_rot(axes.knee_l, a("knee_flexion")))
+        arm = _compose(
+            _rot(Z, -a("shoulder_flexion")), _rot(Y, -a("shoulder_elevation")), _rot(X, a("shoulder_twist")),
+            _rot(Y, -t_pose_deg),
+        )  # fmt: skip
+        elbow = _compose(_rot(axes.elbow_l, a("elbow_flexion")))
+        pose[f"upperleg01.{side}"] = left(hip)
+        pose[f"lowerleg01.{side}"] = left(knee)
+        pose[f"upperarm01.{side}"] = left(arm)
+        pose[f"lowerarm01.{side}"] = left(elbow)
+    k = len(SPINE_BONES)
+    spine = _compose(
+        _rot(X, get["spine_flexion"] / k), _rot(Y, get["spine_lateral"] / k), _rot(Z, get["spine_twist"] / k)
+    )
+    for bone in SPINE_BONES:
+        pose[bone] = spine.copy()
+    pose["neck01"] = _compose(_rot(X, get["neck_flexion"]), _rot(Y, get["neck_lateral"]), _rot(Z, get["neck_twist"]))
+    return pose
+
+
+def sample_pose(
+    rng: np.random.Generator, limits: JointLimits | None = None, axes: HingeAxes | None = None
+) -> dict[str, np.ndarray]:
+    """One random pose within ``limits`` (bone -> (3,) axis-angle), without the collision check."""
+    pose = angles_to_pose(sample_joint_angles(rng, 1, limits), axes)
+    return {k: v[0] for k, v in pose.items()}
+
+
+def batched_matrices(pose: Mapping[str, np.ndarray]) -> dict[str, np.ndarray]:
+    """Batched axis-angles (bone -> (n, 3)) -> homogeneous (n, 4, 4) rotations.
+
+    ``AnnyBody.pose_batch`` reads a (3, 3) array as one rotation matrix, so a batch of exactly three
+    axis-angles would be misread; matrices are unambiguous for any batch size.
+    """
+    out = {}
+    for bone, r in pose.items():
+        rv = torch.as_tensor(np.asarray(r, dtype=np.float64).reshape(-1, 3))
+        h = torch.eye(4, dtype=torch.float64).repeat(len(rv), 1, 1)
+        h[:, :3, :3] = roma.rotvec_to_rotmat(rv)
+        out[bone] = h.numpy()
+    return out
+
+
+def unbatch(pose: Mapping[str, np.ndarray], i: int) -> dict[str, np.ndarray]:
+    """Pose ``i`` of a batched pose dict (bone -> (n, 3))."""
+    return {k: np.asarray(v)[i] for k, v in pose.items()}
+
+
+# -- limb-through-body test ----------------------------------------------------------------------
+_LIMB_PATTERNS = {
+    "arm": r"^(upperarm|lowerarm|wrist|finger|metacarpal)",
+    "leg": r"^(upperleg|lowerleg|foot|toe)",
+}
+PART_PAIRS: tuple[tuple[str, str], ...] = (
+    ("arm.L", "torso"), ("arm.R", "torso"), ("leg.L", "torso"), ("leg.R", "torso"),
+    ("leg.L", "leg.R"), ("leg.R", "leg.L"),
+    ("arm.L", "leg.L"), ("arm.L", "leg.R"), ("arm.R", "leg.L"), ("arm.R", "leg.R"),
+)  # fmt: skip
+"""(points, surface) pairs tested: limbs against the torso, the legs against each other, arms against legs."""
+
+
+def body_part(bone: str) -> str:
+    """Body part of a bone: ``arm.L``/``arm.R``/``leg.L``/``leg.R``, ``eye`` (inner geometry) or ``torso``."""
+    if bone.startswith("eye"):
+        return "eye"
+    for limb, pattern in _LIMB_PATTERNS.items():
+        if re.match(pattern, bone) and bone[-2:] in (".L", ".R"):
+            return f"{limb}{bone[-2:]}"
+    return "torso"
+
+
+@dataclass(frozen=True)
+class CollisionConfig:
+    """Limb-through-body test: depth threshold, query radius, and the junction band left out."""
+
+    depth: float = 0.01
+    """A vertex with (x - b) . n < -depth (metres) is inside the surface (nearest vertex b, normal n)."""
+    radius: float = 0.04
+    """Only points within this distance of their nearest surface vertex count: far from an open part's
+    seam the nearest-vertex normal says nothing. A limb that passes through a surface crosses it, so
+    its shallow vertices (depth .. radius) are always caught."""
+    junction: float = 0.04
+    """Limb vertices within this distance of the other part in the canonical pose (the shoulder, hip
+    and inner-thigh skin, where linear blend skinning folds) are not tested against that part."""
+
+
+class LimbCollisionChecker:
+    """Finds poses whose limbs pass through the torso, the other leg, or a leg (arms), vectorised."""
+
+    def __init__(self, body: AnnyBody, config: CollisionConfig | None = None) -> None:
+        self.config = config or CollisionConfig()
+        w, idx = body.skin_weights, body.skin_indices
+        dominant = idx[np.arange(len(w)), w.argmax(axis=1)]
+        bone_part = np.array([body_part(b) for b in body.bone_labels])
+        self.part = bone_part[dominant]
+        self.faces = body.faces
+        # Incident faces of every vertex, padded with -1, for normals at a few vertices at a time.
+        f = body.faces
+        vert = f.ravel()
+        order = np.argsort(vert, kind="stable")
+        degree = np.bincount(vert, minlength=body.num_vertices)
+        start = np.concatenate([[0], np.cumsum(degree)[:-1]])
+        slot = np.arange(len(vert)) - np.repeat(start, degree)
+        self._ring = np.full((body.num_vertices, degree.max()), -1, dtype=np.int64)
+        self._ring[vert[order], slot] = order // 3
+        self._surface = {p: np.flatnonzero(self.part == p) for p in {b for _, b in PART_PAIRS}}
+        canonical = body.canonical().vertices.astype(np.float64)
+        self._tested: dict[tuple[str, str], np.ndarray] = {}
+        for a, b in PART_PAIRS:
+            pts = np.flatnonzero(self.part == a)
+            dist, _ = cKDTree(canonical[self.part == b]).query(canonical[pts])
+            self._tested[(a, b)] = pts[dist >= self.config.junction]
+
+    def vertex_normals(self, vertices: np.ndarray, which: np.ndarray | None = None) -> np.ndarray:
+        """Area-weighted unit normals of body vertices (V, 3) at vertex ids ``which`` (default: all)."""
+        v = np.asarray(vertices, dtype=np.float64)
+        ring = self._ring if which is None else self._ring[which]  # (N, max degree) incident faces, -1 padded
+        tri = v[self.faces[np.maximum(ring, 0)]]  # (N, D, 3, 3)
+        fn = np.cross(tri[:, :, 1] - tri[:, :, 0], tri[:, :, 2] - tri[:, :, 0])
+        vn = (fn * (ring >= 0)[..., None]).sum(axis=1)
+        return vn / np.maximum(np.linalg.norm(vn, axis=-1, keepdims=True), 1e-20)
+
+    def penetration_counts(self, vertices: np.ndarray) -> np.ndarray:
+        """(B, len(PART_PAIRS)) number of vertices of each part found inside the other, per pose."""
+        v = np.asarray(vertices, dtype=np.float64)
+        if v.ndim == 2:
+            v = v[None]
+        counts = np.zeros((len(v), len(PART_PAIRS)), dtype=np.int64)
+        r = self.config.radius
+        lows = {p: v[:, ix].min(axis=1) - r for p, ix in self._surface.items()}
+        highs = {p: v[:, ix].max(axis=1) + r for p, ix in self._surface.items()}
+        for i in range(len(v)):
+            trees = {p: cKDTree(v[i, ix], balanced_tree=False, compact_nodes=False) for p, ix in self._surface.items()}
+            boxes = {p: (lows[p][i], highs[p][i]) for p in self._surface}
+            for k, (a, b) in enumerate(PART_PAIRS):
+                pts = v[i, self._tested[(a, b)]]
+                lo, hi = boxes[b]  # only points within the radius of the surface's bounding box can hit
+                pts = pts[((pts >= lo) & (pts <= hi)).all(axis=1)]
+                if len(pts) == 0:
+                    continue
+                dist, near = trees[b].query(pts, distance_upper_bound=r)
+                hit = np.isfinite(dist)
+                if not hit.any():
+                    continue
+                q = self._surface[b][near[hit]]
+                offset = np.einsum("ij,ij->i", pts[hit] - v[i, q], self.vertex_normals(v[i], q))
+                counts[i, k] = int((offset < -self.config.depth).sum())
+        return counts
+
+    def valid(self, vertices: np.ndarray) -> np.ndarray:
+        """(B,) True where no limb passes through the torso, the other leg or a leg."""
+        return self.penetration_counts(vertices).sum(axis=1) == 0
+
+
+# -- sampler -------------------------------------------------------------------------------------
+class PoseSampler:
+    """Random valid poses: joint angles uniform within limits, limb-through-body poses rejected.
+
+    Reproducible: the same ``seed`` (and body, limits) gives the same poses.
+    """
+
+    def __init__(
+        self,
+        body: AnnyBody | None = None,
+        limits: JointLimits | None = None,
+        seed: int | None = 0,
+        collision: CollisionConfig | None = None,
+        batch_size: int = 32,
+        max_batches: int = 1000,
+    ) -> None:
+        self.body = body if body is not None else AnnyBody()
+        self.limits = limits or JointLimits()
+        self.rng = np.random.default_rng(seed)
+        self.axes = hinge_axes(self.body)
+        self.checker = LimbCollisionChecker(self.body, collision)
+        self.batch_size = batch_size
+        self.max_batches = max_batches
+        self.acceptance_rate: float | None = None
+
+    def sample(self, n: int, return_angles: bool = False):
+        """``n`` valid poses (list of bone -> (3,) axis-angle dicts); with ``return_angles`` also their angles."""
+        if n < 0:
+            raise ValueError(f"number of poses must be >= 0, got {n}")
+        poses: list[dict[str, np.ndarray]] = []
+        angles: list[dict[str, float]] = []
+        tried = 0
+        for _ in range(self.max_batches):
+            if len(poses) >= n:
+                break
+            batch_angles = sample_joint_angles(self.rng, self.batch_size, self.limits)
+            batch_pose = angles_to_pose(batch_angles, self.axes)
+            vertices, _ = self.body.pose_batch(batched_matrices(batch_pose))
+            ok = self.checker.valid(vertices)
+            tried += self.batch_size
+            for i in np.flatnonzero(ok)[: n - len(poses)]:
+                poses.append(unbatch(batch_pose, i))
+                angles.append({k: float(v[i]) for k, v in batch_angles.items()})
+        if len(poses) < n:
+            raise RuntimeError(
+                f"only {len(poses)} of {n} poses passed the collision test in {tried} tries; widen the joint limits"
+            )
+        self.acceptance_rate = len(poses) / max(tried, 1)
+        return (poses, angles) if return_angles else poses
+
+
+# -- sequences -----------------------------------------------------------------------------------
+def interpolate_poses(
+    pose_a: Mapping[str, np.ndarray], pose_b: Mapping[str, np.ndarray], num_frames: int
+) -> list[dict[str, np.ndarray]]:
+    """``num_frames`` poses from ``pose_a`` to ``pose_b`` (both included), slerp per bone; missing bones = identity."""
+    if num_frames < 2:
+        raise ValueError(f"num_frames must be >= 2 (both ends are included), got {num_frames}")
+    bones = sorted(set(pose_a) | set(pose_b))
+    if not bones:
+        return [{} for _ in range(num_frames)]
+
+    def rotvecs(pose: Mapping[str, np.ndarray]) -> torch.Tensor:
+        out = []
+        for bone in bones:
+            r = np.asarray(pose.get(bone, np.zeros(3)), dtype=np.float64)
+            if r.shape != (3,):
+                raise ValueError(f"bone {bone!r}: interpolate_poses takes axis-angle (3,) rotations, got shape {r.shape}")
+            out.append(r)
+        return torch.as_tensor(np.stack(out))
+
+    ra, rb = rotvecs(pose_a), rotvecs(pose_b)
+    steps = torch.linspace(0.0, 1.0, num_frames, dtype=torch.float64)
+    frames = roma.rotvec_slerp(ra, rb, steps).numpy()  # (T, bones, 3)
+    frames[0], frames[-1] = ra.numpy(), rb.numpy()  # exact ends (slerp's round trip is ~1e-16 off)
+    return [{bone: frames[t, j] for j, bone in enumerate(bones)} for t in range(num_frames)]
+
+
+def stack_poses(poses: Sequence[Mapping[str, np.ndarray]]) -> dict[str, np.ndarray]:
+    """A list of pose dicts -> one batched dict (bone -> (T, 3)); missing bones are identity."""
+    bones = sorted({b for p in poses for b in p})
+    return {b: np.stack([np.asarray(p.get(b, np.zeros(3)), dtype=np.float64) for p in poses]) for b in bones}
+
+
+def pose_sequence(body: AnnyBody, target_pose: Mapping[str, np.ndarray], num_frames: int) -> tuple[np.ndarray, np.ndarray]:
+    """Body moving from the T-pose to ``target_pose``: vertices (T, V, 3) and skinning transforms (T, J, 4, 4)."""
+    frames = interpolate_poses(body.t_pose(), target_pose, num_frames)
+    return body.pose_batch(batched_matrices(stack_poses(frames)))
+
+
+# -- walk cycle ----------------------------------------------------------------------------------
+LEG_LENGTH = 0.85
+"""Hip-to-floor length (m) used to turn a stride into a hip swing amplitude."""
+
+
+def walk_pose(phase: float | np.ndarray, stride: float = 0.6, axes: HingeAxes | None = None) -> dict[str, np.ndarray]:
+    """Walk pose(s) at ``phase`` (radians, period 2 pi): legs swing in counter-phase, arms opposite the legs.
+
+    ``stride`` is the distance (m) between the feet at full step; the hip swing amplitude is
+    ``asin(stride / (2 * LEG_LENGTH))``. Returns (n, 3) axis-angles per bone for n phases.
+    """
+    if not (0.0 < stride < 2 * LEG_LENGTH):
+        raise ValueError(f"stride must be in (0, {2 * LEG_LENGTH}) metres, got {stride}")
+    phi = np.atleast_1d(np.asarray(phase, dtype=np.float64))
+    amp = math.degrees(math.asin(stride / (2 * LEG_LENGTH)))
+    s = np.sin(phi)
+    angles = {
+        # Left leg forward while sin(phi) > 0; the right leg is half a period behind.
+        "hip_flexion_L": amp * s,
+        "hip_flexion_R": -amp * s,
+        # The knee bends while the leg swings forwards (the quarter period before it reaches the front).
+        "knee_flexion_L": 5.0 + 55.0 * np.clip(np.cos(phi - math.pi / 4), 0.0, None) ** 2,
+        "knee_flexion_R": 5.0 + 55.0 * np.clip(np.cos(phi + math.pi - math.pi / 4), 0.0, None) ** 2,
+        "hip_abduction_L": np.full_like(phi, 3.0),
+        "hip_abduction_R": np.full_like(phi, 3.0),
+        # Arms down by the sides, swinging opposite to the leg of the same side.
+        "shoulder_elevation_L": np.full_like(phi, -75.0),
+        "shoulder_elevation_R": np.full_like(phi, -75.0),
+        "elbow_flexion_L": 10.0 + 10.0 * np.clip(-s, 0.0, None),
+        "elbow_flexion_R": 10.0 + 10.0 * np.clip(s, 0.0, None),
+        "spine_twist": -0.4 * amp * s,
+    }
+    # With the arm lowered, a forward swing is a rotation about X applied after the arm is lowered.
+    pose = angles_to_pose(angles, axes)
+    arm_amp = 0.8 * amp
+    # Rx(-a) swings a hanging arm forwards (-Y): the left arm goes forwards while the left leg is back (s < 0).
+    for side, sign in (("L", 1.0), ("R", -1.0)):
+        swing = _rot(X, sign * arm_amp * s)
+        base = roma.rotvec_to_rotmat(torch.as_tensor(pose[f"upperarm01.{side}"]))
+        pose[f"upperarm01.{side}"] = roma.rotmat_to_rotvec(swing @ base).numpy()
+    return pose
+
+
+def walk_cycle(
+    num_frames: int, stride: float = 0.6, axes: HingeAxes | None = None, include_end: bool = True
+) -> list[dict[str, np.ndarray]]:
+    """One period of a procedural walk in ``num_frames`` steps; with ``include_end`` frame N repeats frame 0."""
+    if num_frames < 2:
+        raise ValueError(f"num_frames must be >= 2, got {num_frames}")
+    count = num_frames + 1 if include_end else num_frames
+    phases = 2.0 * math.pi * np.arange(count) / num_frames
+    batched = walk_pose(phases, stride, axes)
+    return [unbatch(batched, i) for i in range(count)]
