@@ -126,6 +126,12 @@ def sample_joint_angles(rng: np.random.Generator, n: int, limits: JointLimits | 
     return {name: rng.uniform(*limit_of(limits, name), size=n) for name in angle_names()}
 
 
+def stack_angles(angle_sets: Sequence[Mapping[str, float]]) -> dict[str, np.ndarray]:
+    """A list of joint-angle dicts (degrees) -> name -> (n,) arrays; missing angles are 0."""
+    names = sorted({k for a in angle_sets for k in a})
+    return {k: np.array([float(a.get(k, 0.0)) for a in angle_sets]) for k in names}
+
+
 def _rot(axis: Sequence[float], degrees: np.ndarray) -> torch.Tensor:
     """(n, 3, 3) rotations about a fixed unit ``axis`` by ``degrees`` (n,)."""
     a = torch.as_tensor(np.asarray(axis, dtype=np.float64))
