@@ -137,59 +137,78 @@ def _rasterize(
     """Z-buffer: per pixel the nearest face id (-1 for none) and barycentric coordinates (H, W, 3).
 
     ``xy`` are vertex positions in pixel units (x right, y down), ``depth`` grows away from the camera.
+    Scanline spans: for every (triangle, pixel row) the covered columns are found analytically, so
+    only covered pixels are generated; the nearest candidate per pixel wins.
     """
     n_pix = height * width
     best_depth = np.full(n_pix, np.inf)
     best_face = np.full(n_pix, -1, dtype=np.int64)
-    best_bary = np.zeros((n_pix, 3))
-    if len(faces) == 0:
-        return best_face.reshape(height, width), best_bary.reshape(height, width, 3)
     tri = xy[faces]  # (F, 3, 2)
-    lo = np.ceil(tri.min(axis=1) - 0.5).astype(np.int64)
-    hi = np.floor(tri.max(axis=1) - 0.5).astype(np.int64)
-    lo = np.maximum(lo, 0)
-    hi = np.minimum(hi, [width - 1, height - 1])
-    nx = hi[:, 0] - lo[:, 0] + 1
-    ny = hi[:, 1] - lo[:, 1] + 1
     a, b, c = tri[:, 0], tri[:, 1], tri[:, 2]
     det = (b[:, 1] - c[:, 1]) * (a[:, 0] - c[:, 0]) + (c[:, 0] - b[:, 0]) * (a[:, 1] - c[:, 1])
-    keep = np.flatnonzero((nx > 0) & (ny > 0) & (np.abs(det) > 1e-12))
-    counts = nx[keep] * ny[keep]
+    y_lo = np.maximum(np.ceil(tri[:, :, 1].min(axis=1) - 0.5), 0).astype(np.int64)
+    y_hi = np.minimum(np.floor(tri[:, :, 1].max(axis=1) - 0.5), height - 1).astype(np.int64)
+    keep = np.flatnonzero((y_hi >= y_lo) & (np.abs(det) > 1e-12) & (tri[:, :, 0].max(axis=1) >= 0) & (tri[:, :, 0].min(axis=1) <= width))
     if len(keep) == 0:
-        return best_face.reshape(height, width), best_bary.reshape(height, width, 3)
-    cum = np.cumsum(counts)
+        return best_face.reshape(height, width), np.zeros((height, width, 3))
+    # (triangle, row) pairs and each row's covered column span
+    nrows = y_hi[keep] - y_lo[keep] + 1
+    rf = np.repeat(keep, nrows)
+    ry = y_lo[rf] + np.arange(nrows.sum()) - np.repeat(np.cumsum(nrows) - nrows, nrows)
+    qy = ry + 0.5
+    x_min = np.full(len(rf), np.inf)
+    x_max = np.full(len(rf), -np.inf)
+    for i, j in ((0, 1), (1, 2), (2, 0)):
+        p0, p1 = tri[rf, i], tri[rf, j]
+        dy = p1[:, 1] - p0[:, 1]
+        hit = (np.minimum(p0[:, 1], p1[:, 1]) <= qy) & (qy <= np.maximum(p0[:, 1], p1[:, 1])) & (dy != 0)
+        t = np.where(hit, (qy - p0[:, 1]) / np.where(dy != 0, dy, 1.0), 0.0)
+        x = p0[:, 0] + t * (p1[:, 0] - p0[:, 0])
+        x_min = np.where(hit, np.minimum(x_min, x), x_min)
+        x_max = np.where(hit, np.maximum(x_max, x), x_max)
+    c0 = np.maximum(np.ceil(x_min - 0.5), 0)
+    c1 = np.minimum(np.floor(x_max - 0.5), width - 1)
+    ncols = np.where(np.isfinite(c0) & np.isfinite(c1), c1 - c0 + 1, 0).clip(min=0).astype(np.int64)
+    good = ncols > 0
+    rf, ry, c0, ncols = rf[good], ry[good], c0[good].astype(np.int64), ncols[good]
+    if len(rf) == 0:
+        return best_face.reshape(height, width), np.zeros((height, width, 3))
+    zmin, zmax = float(depth.min()), float(depth.max())
+    zscale = 0.5 / max(zmax - zmin, 1e-12)
+    cum = np.cumsum(ncols)
     splits = np.searchsorted(cum, np.arange(_MAX_CANDIDATES, cum[-1], _MAX_CANDIDATES), side="right")
-    edges = np.unique(np.concatenate([[0], splits, [len(keep)]]))
-    for start, stop in zip(edges[:-1], edges[1:]):
-        fid = keep[start:stop]
-        cnt = counts[start:stop]
-        rep = np.repeat(np.arange(len(fid)), cnt)
-        local = np.arange(cnt.sum()) - np.repeat(np.cumsum(cnt) - cnt, cnt)
-        f = fid[rep]
-        px = lo[f, 0] + local % nx[f]
-        py = lo[f, 1] + local // nx[f]
-        qx, qy = px + 0.5, py + 0.5
-        dx, dy = qx - c[f, 0], qy - c[f, 1]
+    bounds = np.unique(np.concatenate([[0], splits, [len(rf)]]))
+    for start, stop in zip(bounds[:-1], bounds[1:]):
+        cnt = ncols[start:stop]
+        rep = np.repeat(np.arange(start, stop), cnt)
+        f = rf[rep]
+        px = c0[rep] + np.arange(cnt.sum()) - np.repeat(np.cumsum(cnt) - cnt, cnt)
+        py = ry[rep]
+        dx, dy = px + 0.5 - c[f, 0], py + 0.5 - c[f, 1]
         la = ((b[f, 1] - c[f, 1]) * dx + (c[f, 0] - b[f, 0]) * dy) / det[f]
         lb = ((c[f, 1] - a[f, 1]) * dx + (a[f, 0] - c[f, 0]) * dy) / det[f]
-        lc = 1.0 - la - lb
-        eps = -1e-9
-        ins = (la >= eps) & (lb >= eps) & (lc >= eps)
-        f, px, py, la, lb, lc = f[ins], px[ins], py[ins], la[ins], lb[ins], lc[ins]
-        z = la * depth[faces[f, 0]] + lb * depth[faces[f, 1]] + lc * depth[faces[f, 2]]
+        z = la * depth[faces[f, 0]] + lb * depth[faces[f, 1]] + (1.0 - la - lb) * depth[faces[f, 2]]
         pix = py * width + px
-        order = np.lexsort((z, pix))
-        pix, z = pix[order], z[order]
-        first = np.ones(len(pix), dtype=bool)
-        first[1:] = pix[1:] != pix[:-1]
+        # one float sort: pixel index, then depth (scaled into [0, 0.5)) within a pixel
+        order = np.argsort(pix + (np.clip(z, zmin, zmax) - zmin) * zscale, kind="stable")
+        pix_s = pix[order]
+        first = np.ones(len(order), dtype=bool)
+        first[1:] = pix_s[1:] != pix_s[:-1]
         sel = order[first]
-        pix, z = pix[first], z[first]
-        closer = z < best_depth[pix]
-        pix, sel = pix[closer], sel[closer]
-        best_depth[pix] = z[closer]
-        best_face[pix] = f[sel]
-        best_bary[pix] = np.stack([la[sel], lb[sel], lc[sel]], axis=1)
-    return best_face.reshape(height, width), best_bary.reshape(height, width, 3)
+        pix_w, z_w = pix[sel], z[sel]
+        closer = z_w < best_depth[pix_w]
+        best_depth[pix_w[closer]] = z_w[closer]
+        best_face[pix_w[closer]] = f[sel[closer]]
+    # barycentric coordinates of the winning face at each covered pixel centre
+    bary = np.zeros((n_pix, 3))
+    hitpix = np.flatnonzero(best_face >= 0)
+    f = best_face[hitpix]
+    dx = hitpix % width + 0.5 - c[f, 0]
+    dy = hitpix // width + 0.5 - c[f, 1]
+    la = ((b[f, 1] - c[f, 1]) * dx + (c[f, 0] - b[f, 0]) * dy) / det[f]
+    lb = ((c[f, 1] - a[f, 1]) * dx + (a[f, 0] - c[f, 0]) * dy) / det[f]
+    bary[hitpix] = np.clip(np.stack([la, lb, 1.0 - la - lb], axis=1), 0.0, 1.0)
+    return best_face.reshape(height, width), bary.reshape(height, width, 3)
 
 
 def _prepare(
