@@ -36,7 +36,7 @@ def dominant(body):
 @pytest.fixture(scope="module")
 def sampled(body):
     """200 poses from seed 0, with their joint angles (the expensive part, done once)."""
-    sampler = P.PoseSampler(body, seed=0, batch_size=64)
+    sampler = P.PoseSampler(body=body, seed=0, batch_size=64)
     poses, angles = sampler.sample(200, return_angles=True)
     return sampler, poses, angles
 
@@ -190,8 +190,8 @@ def test_sampled_poses_respect_the_joint_limits(sampled, axes):
 
 def test_sampler_is_reproducible_from_its_seed(body, sampled):
     _, poses, _ = sampled
-    again = P.PoseSampler(body, seed=0, batch_size=64).sample(10)
-    other = P.PoseSampler(body, seed=1, batch_size=64).sample(10)
+    again = P.PoseSampler(body=body, seed=0, batch_size=64).sample(10)
+    other = P.PoseSampler(body=body, seed=1, batch_size=64).sample(10)
     for a, b in zip(again, poses[:10]):
         assert a.keys() == b.keys()
         for bone in a:
@@ -201,7 +201,7 @@ def test_sampler_is_reproducible_from_its_seed(body, sampled):
 
 def test_narrow_limits_give_the_t_pose(body):
     zero = P.JointLimits(**{f: (0.0, 0.0) for f in P.JointLimits.__dataclass_fields__})
-    poses = P.PoseSampler(body, limits=zero, seed=5, batch_size=4).sample(2)
+    poses = P.PoseSampler(body=body, limits=zero, seed=5, batch_size=4).sample(2)
     t_pose = body.t_pose()
     for pose in poses:
         for bone, rotvec in pose.items():

@@ -325,14 +325,16 @@ class LimbCollisionChecker:
 class PoseSampler:
     """Random valid poses: joint angles uniform within limits, limb-through-body poses rejected.
 
-    Reproducible: the same ``seed`` (and body, limits) gives the same poses.
+    Reproducible: the same ``seed`` (and body, limits, batch size) gives the same poses. ``body``
+    defaults to the default-phenotype ``AnnyBody``; the knee/elbow hinges and the collision test
+    use that body.
     """
 
     def __init__(
         self,
-        body: AnnyBody | None = None,
         limits: JointLimits | None = None,
         seed: int | None = 0,
+        body: AnnyBody | None = None,
         collision: CollisionConfig | None = None,
         batch_size: int = 32,
         max_batches: int = 1000,
