@@ -1,0 +1,106 @@
+"""Sample -> graph (Eq. 2): every input checked against brute-force values; batching offsets."""
+
+import numpy as np
+import pytest
+import torch
+from model_fixtures import make_sample, rot_z, transform_sample
+
+from garsim.data.sample import FABRICS
+from garsim.geometry.mesh import directed_edges, face_pairs
+from garsim.model.config import GarSimConfig
+from garsim.model.inputs import body_yaw_frame, build_graph, collate, mesh_directed_edges, semantic_vector
+
+
+@pytest.fixture(scope="module")
+def sample():
+    return make_sample(n_around=16, n_down=5, fabric="denim", pose_id=2)
+
+
+def test_eq2_quantities_match_brute_force(sample):
+    cfg = GarSimConfig(canonicalize_yaw=False)
+    g = build_graph(sample, cfg)
+    G, B, Bt, P = sample.garment, sample.body_canonical, sample.body_target, sample.prior
+    d2 = ((G[:, None, :].astype(np.float64) - B[None]) ** 2).sum(-1)
+    q = d2.argmin(axis=1)
+    assert np.array_equal(g.q.numpy(), q)
+    np.testing.assert_allclose(g.p.numpy(), G - B[q], atol=1e-6)
+    np.testing.assert_allclose(g.p_prior.numpy(), P - Bt[q], atol=1e-6)
+    np.testing.assert_allclose(g.delta.numpy(), Bt[q] - B[q], atol=1e-6)
+    s, r = g.edge_index.numpy()
+    np.testing.assert_allclose(g.edge_attr.numpy()[:, :3], G[r] - G[s], atol=1e-6)
+    np.testing.assert_allclose(g.edge_attr.numpy()[:, 3:], P[r] - P[s], atol=1e-6)
+    assert g.edge_index.shape[1] == 2 * (16 * 5 + 2 * 16 * 4)  # rings + verticals + diagonals, both ways
+    onehot = np.zeros(len(FABRICS))
+    onehot[FABRICS.index("denim")] = 1
+    assert (g.fabric.numpy() == onehot).all()
+    assert g.pinned.sum() == 16
+    # geometry-encoder neighbourhoods: self first (zero), then the true nearest garment vertices
+    knn = np.sort(np.sqrt(((G[:, None] - G[None]) ** 2).sum(-1)), axis=1)[:, : cfg.knn_garment]
+    np.testing.assert_allclose(np.linalg.norm(g.gar_rel.numpy(), axis=-1), knn, atol=1e-6)
+    np.testing.assert_allclose(g.body_rel.numpy()[:, 0], 0.0)
+    assert np.array_equal(g.face_pairs.numpy(), face_pairs(sample.garment_faces))
+
+
+def test_yaw_frame_commutes_with_rotation(sample):
+    r0 = body_yaw_frame(sample.body_canonical)
+    assert abs(r0[0, 0] - 1.0) < 1e-3  # Anny already faces -Y: the frame is ~identity
+    rz = rot_z(1.1)
+    r1 = body_yaw_frame(sample.body_canonical @ rz.T + np.array([3.0, -2.0, 0.5]))
+    np.testing.assert_allclose(r1, r0 @ rz.T, atol=1e-6)  # frame(R x) = frame(x) R^T
+    np.testing.assert_allclose(r1 @ r1.T, np.eye(3), atol=1e-9)
+
+
+def test_inputs_invariant_to_yaw_and_translation(sample):
+    g0 = build_graph(sample)
+    moved = transform_sample(sample, rot_z(-2.0), np.array([0.4, 0.3, -0.2]))
+    g1 = build_graph(moved)
+    for key in ("p", "p_prior", "delta", "edge_attr", "gar_rel", "body_rel", "sem"):
+        np.testing.assert_allclose(getattr(g1, key).numpy(), getattr(g0, key).numpy(), atol=5e-5, err_msg=key)
+
+
+def test_semantic_vectors(sample):
+    cfg_v = GarSimConfig(semantic="vertex", num_body_vertices=len(sample.body_canonical))
+    g = build_graph(sample, cfg_v)
+    mask = g.sem.numpy()[0]
+    assert set(np.flatnonzero(mask)) == set(g.q.numpy().tolist())
+    with pytest.raises(ValueError, match="semantic='grid'"):
+        build_graph(sample, GarSimConfig(semantic="vertex", num_body_vertices=6890))
+    grid = build_graph(sample).sem.numpy()[0].reshape(8, 4, 16)
+    assert grid.min() >= 0 and grid.max() < 1
+    # the skirt spans z in [-0.45, 0] on a body from z=-0.87 to 0.76: normalised heights 0.26..0.53,
+    # i.e. grid coordinates 3.9..8.0 of 15 -> trilinear cells 3..9 only (nothing at the chest or legs)
+    occupied_z = np.flatnonzero(grid.sum(axis=(0, 1)) > 0)
+    assert occupied_z.min() >= 3 and occupied_z.max() <= 9
+    # a single vertex at a grid node lands in that cell with 1 - exp(-1)
+    one = semantic_vector(np.array([[-0.5, -0.25, 0.0], [0.5, 0.25, 1.0], [0.0, 0.0, 0.0]]), np.array([0]), GarSimConfig())
+    assert one.reshape(8, 4, 16)[0, 0, 0] == pytest.approx(1 - np.exp(-1)) and one.sum() == pytest.approx(1 - np.exp(-1))
+
+
+def test_fast_directed_edges_match_mesh_module(sample):
+    f = sample.garment_faces
+    assert np.array_equal(mesh_directed_edges(f, len(sample.garment)), directed_edges(f))
+
+
+def test_batch_offsets_indices(sample):
+    other = make_sample(n_around=12, n_down=4, fabric="silk", pose_id=3)
+    g0, g1 = build_graph(sample, with_collision=True), build_graph(other, with_collision=True)
+    b = collate([g0, g1])
+    n0, f0 = g0.num_nodes, g0.faces.shape[0]
+    assert b.num_graphs == 2 and b.num_nodes == n0 + g1.num_nodes
+    assert torch.equal(b.edge_index[:, g0.edge_index.shape[1]:], g1.edge_index + n0)
+    assert torch.equal(b.faces[f0:], g1.faces + n0)
+    assert torch.equal(b.face_pairs[g0.face_pairs.shape[0]:], g1.face_pairs + f0)
+    assert b.sem.shape == (2, 512) and b.rot.shape == (2, 3, 3)
+    assert set(b.col_batch.tolist()) == {0, 1}
+    assert b.name == [sample.meta["name"], other.meta["name"]]
+
+
+def test_bad_input_messages(sample):
+    from dataclasses import replace
+
+    with pytest.raises(ValueError, match="faces index"):
+        build_graph(replace(sample, garment_faces=sample.garment_faces + 1000))
+    bad = sample.prior.copy()
+    bad[0, 0] = np.nan
+    with pytest.raises(ValueError, match="non-finite"):
+        build_graph(replace(sample, prior=bad))
