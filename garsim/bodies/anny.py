@@ -40,12 +40,23 @@ def _load_anny(topology: str):
     return model
 
 
+def _is_rotation_matrix(r: torch.Tensor) -> bool:
+    eye = torch.eye(3, dtype=r.dtype)
+    return bool(torch.allclose(r @ r.T, eye, atol=1e-5) and abs(float(torch.linalg.det(r)) - 1.0) < 1e-5)
+
+
 def rotation_to_homogeneous(rot: "np.ndarray | torch.Tensor | Sequence[float]") -> torch.Tensor:
-    """Axis-angle (..., 3), matrix (..., 3, 3) or (..., 4, 4) -> batched (B, 4, 4) float64."""
+    """Axis-angle (3,) / (B, 3), matrix (3, 3) / (B, 3, 3) or (4, 4) / (B, 4, 4) -> (B, 4, 4) float64.
+
+    A (3, 3) array is read as one rotation matrix when it is one (orthonormal, det 1), else as
+    a batch of three axis-angles.
+    """
     import roma
 
     r = torch.as_tensor(np.asarray(rot, dtype=np.float64))
-    if r.shape[-1:] == (3,) and (r.ndim == 1 or r.shape[-2:] != (3, 3)):
+    if r.shape == (3, 3) and not _is_rotation_matrix(r):
+        r = r.reshape(3, 1, 3)  # three axis-angles, not one matrix
+    if r.shape[-1:] == (3,) and r.shape[-2:] != (3, 3):
         r = roma.rotvec_to_rotmat(r.reshape(-1, 3))
     if r.shape[-2:] == (3, 3):
         r = r.reshape(-1, 3, 3)
@@ -117,6 +128,12 @@ class AnnyBody(BodyModel):
         """Anny's rest A-pose with both upper arms raised to a T-pose."""
         a = math.radians(T_POSE_ARM_DEGREES)
         return {"upperarm01.L": np.array([0.0, -a, 0.0]), "upperarm01.R": np.array([0.0, a, 0.0])}
+
+    @property
+    def rest_bone_poses(self) -> np.ndarray:
+        """(J, 4, 4) bone poses of Anny's rest mesh for this phenotype."""
+        with torch.no_grad():
+            return self._run(None)["rest_bone_poses"][0].numpy()
 
     def bone_index(self, name: str) -> int:
         try:

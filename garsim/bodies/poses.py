@@ -109,8 +109,7 @@ class HingeAxes:
 
 def hinge_axes(body: AnnyBody) -> HingeAxes:
     """The knee/elbow hinge axes of ``body``: the X column of Anny's rest bone frames (phenotype-dependent)."""
-    with torch.no_grad():
-        rest = body._run(None)["rest_bone_poses"][0].numpy()
+    rest = body.rest_bone_poses
 
     def axis(name: str) -> tuple[float, float, float]:
         a = rest[body.bone_index(name), :3, 0]
