@@ -62,6 +62,26 @@ def body_parts(
     return parts
 
 
+def _surface_samples(
+    vertices: np.ndarray, faces: np.ndarray, parts: np.ndarray, spacing: float = 0.008
+) -> tuple[np.ndarray, np.ndarray]:
+    """Vertices plus barycentric grid points on long faces (~``spacing`` apart), with their body part."""
+    pts, labels = [vertices], [parts]
+    tri = vertices[faces]
+    longest = np.linalg.norm(tri - np.roll(tri, 1, axis=1), axis=2).max(axis=1)
+    levels = np.clip(np.ceil(longest / spacing), 1, 6).astype(np.int64)
+    for lev in range(2, 7):
+        sel = levels == lev
+        if not sel.any():
+            continue
+        i, j = np.meshgrid(np.arange(lev + 1), np.arange(lev + 1), indexing="ij")
+        keep = (i + j <= lev) & ~(((i == lev) | (j == lev)) | ((i == 0) & (j == 0)))
+        bary = np.stack([i[keep], j[keep], lev - i[keep] - j[keep]], 1) / lev
+        pts.append(np.einsum("bk,fkd->fbd", bary, tri[sel]).reshape(-1, 3))
+        labels.append(np.repeat(parts[faces[sel, 0]], len(bary)))
+    return np.concatenate(pts), np.concatenate(labels)
+
+
 class TemplateBody:
     """A canonical body prepared for template fitting: vertices, faces, part labels and landmarks."""
 
@@ -79,6 +99,7 @@ class TemplateBody:
         self.faces = np.asarray(faces, dtype=np.int64)
         self.parts = parts
         self.normals = vertex_normals(v, self.faces).astype(np.float64)
+        self.points, self.point_parts = _surface_samples(v, self.faces, parts)
         self._measure()
 
     @classmethod
@@ -386,8 +407,8 @@ def _levels(z_top: float, z_bottom: float, h: float) -> np.ndarray:
 def _slices(
     body: TemplateBody, zs: np.ndarray, mask: np.ndarray, angles: np.ndarray, h: float, halfwidth: float
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Per-height slice centres (R, 2) and body polar radii (R, n) of the ``mask`` vertices."""
-    v = body.vertices[mask]
+    """Per-height slice centres (R, 2) and body polar radii (R, n) of the ``mask`` parts' surface points."""
+    v = body.points[_point_mask(body, mask)]
     dz = max(0.6 * h, 0.012)
     centers = np.zeros((len(zs), 2))
     radii = np.zeros((len(zs), len(angles)))
@@ -405,7 +426,18 @@ def _slices(
     for i, z in enumerate(zs):
         sl = v[np.abs(v[:, 2] - z) < dz]
         radii[i] = _polar_max(sl[:, :2], centers[i], angles, halfwidth)
+    empty = ~(radii > 0).any(axis=1)
+    if empty.any() and (~empty).any():  # a ring without body points copies the nearest measured ring
+        full = np.flatnonzero(~empty)
+        nearest = full[np.abs(np.flatnonzero(empty)[:, None] - full[None]).argmin(axis=1)]
+        radii[empty] = radii[nearest]
     return centers, radii
+
+
+def _point_mask(body: TemplateBody, vertex_mask: np.ndarray) -> np.ndarray:
+    """Surface-sample mask selecting the parts that ``vertex_mask`` selects (masks are part unions)."""
+    wanted = np.unique(body.parts[vertex_mask])
+    return np.isin(body.point_parts, wanted)
 
 
 def _ring_points(centers: np.ndarray, radii: np.ndarray, angles: np.ndarray, zs: np.ndarray) -> np.ndarray:
@@ -550,8 +582,13 @@ def _strap(
     body: TemplateBody, mesh: _Mesh, P: np.ndarray, front: np.ndarray, back: np.ndarray, h: float, loose: float
 ) -> np.ndarray:
     """Grid over the shoulder joining ring vertices ``front`` (row 0) to ``back`` (last row); returns (rows, k+1)."""
-    v = body.vertices
-    usable = body.parts != PART_HEAD
+    z_min = float(min(P[front, 2].min(), P[back, 2].min())) - 0.02
+    x_lo = float(min(P[front, 0].min(), P[back, 0].min())) - 0.05
+    x_hi = float(max(P[front, 0].max(), P[back, 0].max())) + 0.05
+    pts = body.points
+    near = (body.point_parts != PART_HEAD) & (pts[:, 2] > z_min) & (pts[:, 0] > x_lo) & (pts[:, 0] < x_hi)
+    v = pts[near]
+    usable = np.ones(len(v), dtype=bool)
     phis = np.linspace(0.0, np.pi, 181)
     curves = []
     for f_i, b_i in zip(front, back):
@@ -601,7 +638,7 @@ def _sleeve(
     z_floor: float,
 ) -> np.ndarray:
     """A sleeve tube along the arm axis starting at the armhole ``loop``; returns ring indices."""
-    v = body.vertices
+    v = body.points
     if side == "L":
         axis, p0, arm = body.arm_axis_l, body.arm_point_l, PART_ARM_L
     else:
@@ -626,7 +663,7 @@ def _sleeve(
     ss = np.linspace(s0, s_end, n_rings)
     d = v - p0
     sv = d @ axis
-    usable = ((body.parts == arm) | (body.parts == PART_TORSO)) & (v[:, 2] > z_floor)
+    usable = ((body.point_parts == arm) | (body.point_parts == PART_TORSO)) & (v[:, 2] > z_floor)
     q_all = np.stack([d @ e1, d @ e2], 1)
     halfwidth = max(np.pi / len(loop), np.radians(4))
     radii = []
