@@ -18,21 +18,72 @@ class BarycentricMap:
     weights: np.ndarray  # (M, 3) float64 barycentric weights (sum to 1)
 
 
-def _closest_point_barycentric(points: np.ndarray, vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Closest full-res triangle of each point and the barycentric coordinates of the closest point on it."""
-    import trimesh
+def _closest_on_triangles(p: np.ndarray, a: np.ndarray, b: np.ndarray, c: np.ndarray) -> np.ndarray:
+    """Barycentric coordinates (..., 3) of the closest point on triangles abc to points p (Ericson 5.1.5)."""
+    ab, ac, ap = b - a, c - a, p - a
+    d1, d2 = (ab * ap).sum(-1), (ac * ap).sum(-1)
+    bp = p - b
+    d3, d4 = (ab * bp).sum(-1), (ac * bp).sum(-1)
+    cp = p - c
+    d5, d6 = (ab * cp).sum(-1), (ac * cp).sum(-1)
+    va = d3 * d6 - d5 * d4
+    vb = d5 * d2 - d1 * d6
+    vc = d1 * d4 - d3 * d2
+    eps = 1e-30
+    denom = va + vb + vc
+    v_in = vb / np.where(np.abs(denom) > eps, denom, eps)
+    w_in = vc / np.where(np.abs(denom) > eps, denom, eps)
+    out = np.stack([1 - v_in - w_in, v_in, w_in], -1)
+    # edge regions
+    t_ab = d1 / np.where(np.abs(d1 - d3) > eps, d1 - d3, eps)
+    t_ac = d2 / np.where(np.abs(d2 - d6) > eps, d2 - d6, eps)
+    t_bc = (d4 - d3) / np.where(np.abs((d4 - d3) + (d5 - d6)) > eps, (d4 - d3) + (d5 - d6), eps)
+    z = np.zeros_like(d1)
+    o = np.ones_like(d1)
+    cases = [
+        ((d1 <= 0) & (d2 <= 0), np.stack([o, z, z], -1)),
+        ((d3 >= 0) & (d4 <= d3), np.stack([z, o, z], -1)),
+        ((d6 >= 0) & (d5 <= d6), np.stack([z, z, o], -1)),
+        ((vc <= 0) & (d1 >= 0) & (d3 <= 0), np.stack([1 - t_ab, t_ab, z], -1)),
+        ((vb <= 0) & (d2 >= 0) & (d6 <= 0), np.stack([1 - t_ac, z, t_ac], -1)),
+        ((va <= 0) & ((d4 - d3) >= 0) & ((d5 - d6) >= 0), np.stack([z, 1 - t_bc, t_bc], -1)),
+    ]
+    done = np.zeros(d1.shape, dtype=bool)
+    for cond, val in cases:
+        take = cond & ~done
+        out[take] = val[take]
+        done |= take
+    return np.clip(out, 0.0, 1.0)
 
-    mesh = trimesh.Trimesh(vertices, faces, process=False, validate=False)
-    closest, _, tri_id = trimesh.proximity.closest_point(mesh, points)
-    tri = vertices[faces[tri_id]]
-    bary = trimesh.triangles.points_to_barycentric(tri, closest)
-    bary = np.clip(bary, 0.0, None)
-    bary /= bary.sum(axis=1, keepdims=True)
-    return faces[tri_id].astype(np.int64), bary
+
+def _closest_point_barycentric(
+    points: np.ndarray, vertices: np.ndarray, faces: np.ndarray, k: int = 16
+) -> tuple[np.ndarray, np.ndarray]:
+    """Closest full-res triangle of each point and the barycentric coordinates of the closest point on it."""
+    from scipy.spatial import cKDTree
+
+    tri = vertices[faces]  # (F, 3, 3)
+    centroids = tri.mean(axis=1)
+    k = min(k, len(faces))
+    _, cand = cKDTree(centroids).query(points, k=k)
+    cand = cand.reshape(len(points), k)
+    t = tri[cand]  # (M, k, 3, 3)
+    p = np.broadcast_to(points[:, None, :], (len(points), k, 3))
+    bary = _closest_on_triangles(p, t[:, :, 0], t[:, :, 1], t[:, :, 2])
+    bary /= bary.sum(-1, keepdims=True)
+    closest = np.einsum("mkj,mkjd->mkd", bary, t)
+    dist = np.linalg.norm(closest - p, axis=-1)
+    best = np.argmin(dist, axis=1)
+    rows = np.arange(len(points))
+    return faces[cand[rows, best]].astype(np.int64), bary[rows, best]
 
 
 def decimate(garment: Garment, ratio: float = 0.25) -> tuple[Garment, BarycentricMap]:
-    """Decimate to ~``ratio`` of the faces keeping border vertices; returns the garment and a full->low map."""
+    """Decimate to ~``ratio`` of the faces keeping border vertices; returns the garment and a full->low map.
+
+    Low-res vertices are placed on the full-res surface, so ``transfer_barycentric(full.vertices, map)``
+    reproduces them; the same map moves any per-vertex data (ground truth, priors) to the low-res mesh.
+    """
     if not (0.0 < ratio <= 1.0):
         raise ValueError(f"decimation ratio must be in (0, 1], got {ratio}")
     import fast_simplification
@@ -50,6 +101,9 @@ def decimate(garment: Garment, ratio: float = 0.25) -> tuple[Garment, Barycentri
     remap[used] = np.arange(len(used))
     v_low, f_low = v_low[used], remap[f_low]
     tris, bary = _closest_point_barycentric(v_low, v, garment.faces)
+    # snap the low-res vertices onto the full-res surface (quadric placement moves them off it by ~mm),
+    # so the low-res garment is exactly the barycentric transfer of the full-res one
+    v_low = np.einsum("mk,mkd->md", bary, v[tris])
     # pinned mask: carried over from the nearest original vertex of the closest triangle
     nearest = tris[np.arange(len(tris)), np.argmax(bary, axis=1)]
     pinned = garment.pinned[nearest]

@@ -892,13 +892,46 @@ _BUILDERS = {
 # ---------------------------------------------------------------------------------------------
 # Finishing: orientation, clearance, public entry points
 # ---------------------------------------------------------------------------------------------
+def _consistent_winding(faces: np.ndarray) -> np.ndarray:
+    """Flip faces so that every interior edge is traversed in opposite directions by its two faces."""
+    import scipy.sparse as sp
+    from scipy.sparse.csgraph import breadth_first_order, connected_components, shortest_path
+
+    f = np.asarray(faces, dtype=np.int64)
+    nf = len(f)
+    d = np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]])
+    fid = np.tile(np.arange(nf), 3)
+    forward = d[:, 0] < d[:, 1]
+    key = np.minimum(d[:, 0], d[:, 1]) * (f.max() + 1) + np.maximum(d[:, 0], d[:, 1])
+    order = np.argsort(key, kind="stable")
+    key, fid, forward = key[order], fid[order], forward[order]
+    pair = np.flatnonzero(key[1:] == key[:-1])
+    a, b = fid[pair], fid[pair + 1]
+    same = forward[pair] == forward[pair + 1]  # same direction: one of the two faces must flip
+    w = np.where(same, 2, 1)
+    g = sp.coo_matrix((np.concatenate([w, w]), (np.concatenate([a, b]), np.concatenate([b, a]))), shape=(nf, nf)).tocsr()
+    ncomp, labels = connected_components(g, directed=False)
+    flip = np.zeros(nf, dtype=bool)
+    for c in range(ncomp):
+        root = int(np.flatnonzero(labels == c)[0])
+        bfs, pred = breadth_first_order(g, root, directed=False, return_predecessors=True)
+        dist = shortest_path(g, directed=False, unweighted=True, indices=root)
+        depth = np.where(np.isfinite(dist), dist, 0).astype(np.int64)
+        rel = np.asarray(g[bfs[1:], pred[bfs[1:]]]).ravel() == 2
+        relative = np.zeros(nf, dtype=bool)
+        relative[bfs[1:]] = rel
+        nodes = bfs[1:]
+        for level in range(1, int(depth[nodes].max(initial=0)) + 1):
+            at = nodes[depth[nodes] == level]
+            flip[at] = flip[pred[at]] ^ relative[at]
+    out = f.copy()
+    out[flip] = out[flip][:, ::-1]
+    return out
+
+
 def _orient_outward(vertices: np.ndarray, faces: np.ndarray, body: TemplateBody) -> np.ndarray:
     """Consistently wind ``faces`` and flip them so normals point away from the body."""
-    import trimesh
-
-    m = trimesh.Trimesh(vertices, faces, process=False, validate=False)
-    trimesh.repair.fix_winding(m)
-    f = np.asarray(m.faces, dtype=np.int64)
+    f = _consistent_winding(faces)
     vn = vertex_normals(vertices, f)
     idx, _ = nearest_vertices(vertices, body.vertices)
     away = vertices - body.vertices[idx]
