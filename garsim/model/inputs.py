@@ -236,6 +236,8 @@ def build_graph(
         name=name if name is not None else str(sample.meta.get("name", "")),
     )
     if sample.target is not None:
+        if not np.isfinite(sample.target).all():
+            raise ValueError(f"sample {data.name!r} has a non-finite target (ground truth): fix or drop it")
         data.target = torch.from_numpy(np.asarray(sample.target, dtype=np.float32).copy())
     if with_collision:
         data.update(collision_body(sample))

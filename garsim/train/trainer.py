@@ -228,7 +228,7 @@ class Trainer:
             self.optimizer.step()
             self.step += 1
             sums["loss"] += float(loss.detach())
-            sums["l2"] += float(terms["l2"].mean()) * 1000.0
+            sums["l2"] += float(terms["l2"].detach().mean()) * 1000.0
             count += 1
             if bar is not None:
                 bar.update(1)
@@ -269,9 +269,13 @@ class Trainer:
         elif self.best_epoch >= 0 and self.epoch - self.best_epoch >= self.cfg.collision_patience:
             self.collision_on = True
 
-    def fit(self) -> list[dict[str, Any]]:
-        """Train for the configured epochs (continuing a resumed run); returns the per-epoch history."""
-        while self.epoch < self.cfg.epochs:
+    def fit(self, stop_after_epoch: int | None = None) -> list[dict[str, Any]]:
+        """Train for the configured epochs (continuing a resumed run); returns the per-epoch history.
+
+        ``stop_after_epoch`` ends early (as an interruption would) without changing the schedule.
+        """
+        last = self.cfg.epochs if stop_after_epoch is None else min(self.cfg.epochs, stop_after_epoch)
+        while self.epoch < last:
             t0 = time.perf_counter()
             train = self.train_epoch()
             val = self.validate()
@@ -296,7 +300,7 @@ class Trainer:
             self.history.append(row)
             if self.rank == 0:
                 self._log(row)
-                if self.epoch % self.cfg.checkpoint_every == 0 or self.epoch == self.cfg.epochs:
+                if self.epoch % self.cfg.checkpoint_every == 0 or self.epoch == last:
                     self.save_checkpoint(self.out / "checkpoint")
         if self.world > 1:
             dist.barrier()
