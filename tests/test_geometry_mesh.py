@@ -108,3 +108,11 @@ def test_directed_edges_are_symmetric(faces):
     d = directed_edges(faces)
     fwd = {tuple(e) for e in d.T}
     assert fwd == {(b, a) for a, b in fwd}
+
+
+def test_unique_edges_matches_row_unique_on_random_mesh():
+    rng = np.random.default_rng(0)
+    faces = rng.integers(0, 500, size=(2000, 3))
+    e = np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]])
+    e.sort(axis=1)
+    np.testing.assert_array_equal(unique_edges(faces), np.unique(e, axis=0))

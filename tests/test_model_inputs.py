@@ -8,7 +8,7 @@ from model_fixtures import make_sample, rot_z, transform_sample
 from garsim.data.sample import FABRICS
 from garsim.geometry.mesh import directed_edges, face_pairs
 from garsim.model.config import GarSimConfig
-from garsim.model.inputs import body_yaw_frame, build_graph, collate, mesh_directed_edges, semantic_vector
+from garsim.model.inputs import body_yaw_frame, build_graph, collate, semantic_vector
 
 
 @pytest.fixture(scope="module")
@@ -74,11 +74,6 @@ def test_semantic_vectors(sample):
     # a single vertex at a grid node lands in that cell with 1 - exp(-1)
     one = semantic_vector(np.array([[-0.5, -0.25, 0.0], [0.5, 0.25, 1.0], [0.0, 0.0, 0.0]]), np.array([0]), GarSimConfig())
     assert one.reshape(8, 4, 16)[0, 0, 0] == pytest.approx(1 - np.exp(-1)) and one.sum() == pytest.approx(1 - np.exp(-1))
-
-
-def test_fast_directed_edges_match_mesh_module(sample):
-    f = sample.garment_faces
-    assert np.array_equal(mesh_directed_edges(f, len(sample.garment)), directed_edges(f))
 
 
 def test_batch_offsets_indices(sample):

@@ -9,9 +9,13 @@ import scipy.sparse as sp
 def unique_edges(faces: np.ndarray) -> np.ndarray:
     """(E, 2) undirected edges (i < j), sorted, from (F, 3) triangles."""
     f = np.asarray(faces, dtype=np.int64)
+    if len(f) == 0:
+        return np.zeros((0, 2), dtype=np.int64)
     e = np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]], axis=0)
-    e.sort(axis=1)
-    return np.unique(e, axis=0)
+    n = int(f.max()) + 1
+    # 1-D integer keys: ~10x faster than np.unique(axis=0), same sorted order
+    key = np.unique(e.min(axis=1) * n + e.max(axis=1))
+    return np.stack([key // n, key % n], axis=1)
 
 
 def directed_edges(faces: np.ndarray) -> np.ndarray:

@@ -25,7 +25,7 @@ from scipy.spatial import cKDTree
 from torch_geometric.data import Batch, Data
 
 from garsim.data.sample import FABRICS, Sample
-from garsim.geometry.mesh import face_pairs, vertex_normals
+from garsim.geometry.mesh import directed_edges, face_pairs, vertex_normals
 from garsim.model.config import GarSimConfig
 
 _TREE_CACHE: OrderedDict[tuple, cKDTree] = OrderedDict()
@@ -117,18 +117,6 @@ def semantic_vector(
     return (1.0 - np.exp(-grid)).astype(np.float32)
 
 
-def mesh_directed_edges(faces: np.ndarray, num_vertices: int) -> np.ndarray:
-    """(2, 2E) directed edges (senders, receivers), same set and order as geometry.mesh.directed_edges.
-
-    Uses 1-D integer keys instead of ``np.unique(axis=0)`` (~10x faster; this is on the inference path).
-    """
-    e = np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]], axis=0)
-    lo, hi = e.min(axis=1), e.max(axis=1)
-    key = np.unique(lo * num_vertices + hi)
-    und = np.stack([key // num_vertices, key % num_vertices])
-    return np.concatenate([und, und[::-1]], axis=1)
-
-
 def _knn_self(points: np.ndarray, k: int) -> np.ndarray:
     """(N, k) indices of the k nearest points (self first); padded with self when N < k."""
     n = len(points)
@@ -206,7 +194,7 @@ def build_graph(
     gidx = _knn_self(g, cfg.knn_garment)
     gar_rel = frame(g[gidx] - g[:, None, :])
 
-    ei = mesh_directed_edges(faces, n)
+    ei = directed_edges(faces)
     s, r = ei[0], ei[1]
     edge_attr = np.concatenate([frame(g[r] - g[s]), frame(prior[r] - prior[s])], axis=1)
 
