@@ -1,0 +1,478 @@
+"""Ground-truth cloth simulation with Newton's VBD solver (CPU): settle, move the body, reject.
+
+``settle`` drapes a template garment on the canonical body under gravity (pinned vertices held)
+until the garment's mean speed falls below a threshold; this gives the paper's template G.
+``simulate_motion`` moves the body canonical -> target over the given frames (the body's collision
+mesh is re-fitted every substep, body positions interpolated between frames), drives the pinned
+vertices along their LBS-prior targets, then holds the target pose and settles again.
+``check_result`` rejects exploded or penetrating results with a named reason.
+
+Only ``garsim.physics`` imports Newton (an optional extra); inference code never does.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from dataclasses import asdict, dataclass
+from typing import Any
+
+import numpy as np
+
+from garsim.garments.fabrics import Fabric, get_fabric
+from garsim.garments.garment import Garment
+from garsim.geometry.mesh import face_normals, face_pairs, unique_edges
+from garsim.geometry.proximity import nearest_vertices
+
+log = logging.getLogger(__name__)
+
+REJECT_NON_FINITE = "non_finite"
+REJECT_OVERSTRETCHED = "overstretched"
+REJECT_PENETRATION = "penetration"
+
+
+class SimulationRejected(RuntimeError):
+    """A simulation result that must not be stored; ``reason`` is one of the ``REJECT_*`` names."""
+
+    def __init__(self, reason: str, detail: str) -> None:
+        super().__init__(f"{reason}: {detail}")
+        self.reason = reason
+        self.detail = detail
+
+
+@dataclass
+class SimConfig:
+    """Time stepping, settling and contact parameters of the Newton VBD simulation."""
+
+    fps: float = 30.0  # stored frames per simulated second
+    substeps: int = 5  # VBD steps per frame
+    iterations: int = 5  # VBD iterations per step
+    damping: float = 0.95  # velocity factor applied after every substep (drag; the rest shape is unchanged)
+    settle_speed: float = 0.03  # m/s: settled when the mean free-vertex speed stays below this
+    settle_patience: int = 3  # consecutive frames below the threshold
+    min_settle_frames: int = 10
+    max_settle_frames: int = 150
+    max_hold_frames: int = 90  # settling cap after the motion, at the target pose
+    gravity: float = -9.81
+    soft_contact_gap: float = 0.01  # m: contact detection gap of the collision pipeline
+    contact_ke: float = 1.0e4  # body-cloth contact stiffness (N/m)
+    contact_kd: float = 1.0e-2  # body-cloth contact damping
+    flat_rest_angles: bool = True  # fabric cut flat: zero rest dihedral angles
+    crop_margin: float | None = 0.15  # m: collide only with body faces this close to the garment's box
+    abort_stretch: float = 3.0  # stop early when any edge exceeds this multiple of its rest length
+
+    def __post_init__(self) -> None:
+        if self.fps <= 0 or self.substeps < 1 or self.iterations < 1:
+            raise ValueError(f"fps > 0, substeps >= 1 and iterations >= 1 required, got {self.fps}, "
+                             f"{self.substeps}, {self.iterations}")
+        if not (0.0 < self.damping <= 1.0):
+            raise ValueError(f"damping is a per-substep velocity factor in (0, 1], got {self.damping}")
+        if self.max_settle_frames < 1 or self.min_settle_frames < 0 or self.settle_patience < 1:
+            raise ValueError("max_settle_frames >= 1, min_settle_frames >= 0, settle_patience >= 1 required")
+
+    @property
+    def frame_dt(self) -> float:
+        return 1.0 / self.fps
+
+    @property
+    def dt(self) -> float:
+        return 1.0 / (self.fps * self.substeps)
+
+
+def _check_mesh(name: str, vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    v = np.ascontiguousarray(vertices, dtype=np.float32)
+    f = np.ascontiguousarray(faces, dtype=np.int32)
+    if v.ndim != 2 or v.shape[1] != 3 or len(v) == 0:
+        raise ValueError(f"{name} vertices must be a non-empty (N, 3) array, got shape {v.shape}")
+    if f.ndim != 2 or f.shape[1] != 3 or len(f) == 0:
+        raise ValueError(f"{name} faces must be a non-empty (F, 3) array, got shape {f.shape}")
+    if not np.isfinite(v).all():
+        raise ValueError(f"{name} vertices contain NaN/inf")
+    if f.min() < 0 or f.max() >= len(v):
+        raise ValueError(f"{name} faces index outside [0, {len(v)})")
+    return v, f
+
+
+def crop_body(
+    body_frames: np.ndarray, body_faces: np.ndarray, boxes: np.ndarray, margin: float | None
+) -> tuple[np.ndarray, np.ndarray]:
+    """Keep body faces with a vertex inside ``boxes`` (T, 2, 3) grown by ``margin`` at any frame.
+
+    Returns (vertex indices kept, faces re-indexed into them). Far faces can never touch the
+    garment, and collision cost grows with the body mesh; ``margin=None`` keeps everything.
+    """
+    body_faces = np.asarray(body_faces, dtype=np.int64)
+    nv = body_frames.shape[1]
+    if margin is None:
+        return np.arange(nv), body_faces
+    lo = boxes[:, 0][:, None] - margin
+    hi = boxes[:, 1][:, None] + margin
+    near = np.all((body_frames >= lo) & (body_frames <= hi), axis=2).any(axis=0)  # (Vb,)
+    keep_face = near[body_faces].any(axis=1)
+    if not keep_face.any():
+        keep_face[:1] = True  # a contact mesh needs at least one triangle
+    used = np.unique(body_faces[keep_face])
+    remap = np.full(nv, -1, dtype=np.int64)
+    remap[used] = np.arange(len(used))
+    return used, remap[body_faces[keep_face]]
+
+
+class _ClothScene:
+    """One Newton model: the garment as VBD cloth, the body as a static, re-fittable triangle mesh."""
+
+    def __init__(
+        self,
+        garment_vertices: np.ndarray,
+        garment_faces: np.ndarray,
+        pinned: np.ndarray,
+        body_vertices: np.ndarray,
+        body_faces: np.ndarray,
+        fabric: Fabric,
+        config: SimConfig,
+    ) -> None:
+        import newton
+        import warp as wp
+
+        self.wp = wp
+        self.config = config
+        gv, gf = _check_mesh("garment", garment_vertices, garment_faces)
+        bv, bf = _check_mesh("body", body_vertices, body_faces)
+        pinned = np.asarray(pinned, dtype=bool)
+        if pinned.shape != (len(gv),):
+            raise ValueError(f"pinned mask has shape {pinned.shape}, expected ({len(gv)},)")
+        self.pinned_idx = np.flatnonzero(pinned)
+        self.free = ~pinned
+        if not self.free.any():
+            raise ValueError("every garment vertex is pinned: nothing to simulate")
+
+        builder = newton.ModelBuilder(up_axis=newton.Axis.Z, gravity=(0.0, 0.0, config.gravity))
+        shape_cfg = builder.default_shape_cfg.copy()
+        shape_cfg.ke = config.contact_ke
+        shape_cfg.kd = config.contact_kd
+        shape_cfg.mu = fabric.friction
+        self.body_mesh = newton.Mesh(bv, bf.ravel(), compute_inertia=False, is_solid=True)
+        builder.add_shape_mesh(body=-1, mesh=self.body_mesh, cfg=shape_cfg)
+        builder.add_cloth_mesh(
+            pos=wp.vec3(0.0, 0.0, 0.0),
+            rot=wp.quat_identity(),
+            scale=1.0,
+            vel=wp.vec3(0.0, 0.0, 0.0),
+            vertices=gv,
+            indices=gf.ravel(),
+            density=fabric.density,
+            tri_ke=fabric.tri_ke,
+            tri_ka=fabric.tri_ka,
+            tri_kd=fabric.tri_kd,
+            edge_ke=fabric.edge_ke,
+            edge_kd=fabric.edge_kd,
+            particle_radius=fabric.thickness,
+        )
+        builder.color(include_bending=True)
+        model = builder.finalize(device="cpu")
+        if config.flat_rest_angles:
+            model.edge_rest_angle.zero_()
+        flags = model.particle_flags.numpy()
+        clear = ~np.array(int(newton.ParticleFlags.ACTIVE), dtype=flags.dtype)
+        flags[self.pinned_idx] &= clear
+        model.particle_flags.assign(flags)
+        model.soft_contact_ke = config.contact_ke
+        model.soft_contact_kd = config.contact_kd
+        model.soft_contact_mu = fabric.friction
+        self.model = model
+        self.pipeline = newton.CollisionPipeline(
+            model, soft_contact_gap=config.soft_contact_gap, enable_rigid_soft_full_surface_contact=True
+        )
+        self.contacts = self.pipeline.contacts()
+        self.solver = newton.solvers.SolverVBD(model, iterations=config.iterations)
+        self.state_0 = model.state()
+        self.state_1 = model.state()
+        self.control = model.control()
+        self.body_points = self.body_mesh.mesh.points
+        self.num_particles = len(gv)
+
+    # -- state access (CPU arrays: numpy views share memory with warp) ------------------------
+    def positions(self) -> np.ndarray:
+        return self.state_0.particle_q.numpy().copy()
+
+    def set_body(self, vertices: np.ndarray) -> None:
+        self.body_points.assign(np.ascontiguousarray(vertices, dtype=np.float32))
+        self.body_mesh.mesh.refit()
+
+    def set_pins(self, targets: np.ndarray) -> None:
+        if len(self.pinned_idx):
+            q = self.state_0.particle_q.numpy()
+            q[self.pinned_idx] = targets
+            qd = self.state_0.particle_qd.numpy()
+            qd[self.pinned_idx] = 0.0
+            self.state_0.particle_q.assign(q)
+            self.state_0.particle_qd.assign(qd)
+
+    def substep(self) -> None:
+        cfg = self.config
+        self.state_0.clear_forces()
+        self.pipeline.collide(self.state_0, self.contacts)
+        self.solver.step(self.state_0, self.state_1, self.control, self.contacts, cfg.dt)
+        self.state_0, self.state_1 = self.state_1, self.state_0
+        if cfg.damping < 1.0:
+            qd = self.state_0.particle_qd.numpy()
+            qd *= cfg.damping
+            self.state_0.particle_qd.assign(qd)
+
+
+def _edge_stretch(vertices: np.ndarray, edges: np.ndarray, rest: np.ndarray) -> float:
+    length = np.linalg.norm(vertices[edges[:, 1]] - vertices[edges[:, 0]], axis=1)
+    return float(np.max(length / np.maximum(rest, 1e-12)))
+
+
+def _settle_loop(
+    scene: _ClothScene, max_frames: int, config: SimConfig, edges: np.ndarray, rest: np.ndarray
+) -> tuple[list[np.ndarray], dict[str, Any]]:
+    """Step whole frames until the mean free-vertex speed stays below the threshold (or the cap)."""
+    frames: list[np.ndarray] = []
+    prev = scene.positions()
+    calm = 0
+    speed = float("nan")
+    speeds: list[float] = []
+    aborted = None
+    for _ in range(max_frames):
+        for _ in range(config.substeps):
+            scene.substep()
+        cur = scene.positions()
+        frames.append(cur)
+        if not np.isfinite(cur).all():
+            aborted = REJECT_NON_FINITE
+            break
+        if _edge_stretch(cur, edges, rest) > config.abort_stretch:
+            aborted = REJECT_OVERSTRETCHED
+            break
+        speed = float(np.linalg.norm(cur[scene.free] - prev[scene.free], axis=1).mean() / config.frame_dt)
+        speeds.append(speed)
+        prev = cur
+        calm = calm + 1 if speed < config.settle_speed else 0
+        if calm >= config.settle_patience and len(frames) >= config.min_settle_frames:
+            break
+    settled = aborted is None and calm >= config.settle_patience
+    return frames, {"frames": len(frames), "final_speed": speed, "settled": settled, "aborted": aborted,
+                    "speeds": speeds}
+
+
+def settle(
+    garment: Garment,
+    body_vertices: np.ndarray,
+    body_faces: np.ndarray,
+    fabric: "str | Fabric",
+    config: SimConfig | None = None,
+) -> tuple[np.ndarray, dict[str, Any]]:
+    """Drape ``garment`` on the (static) body under gravity until it comes to rest; pins held.
+
+    Returns the settled vertices (N, 3) float32 and an info dict (frames, final mean speed in m/s,
+    whether the speed threshold was reached, seconds, seconds per frame, an abort reason or None).
+    """
+    config = config or SimConfig()
+    fabric = get_fabric(fabric)
+    t0 = time.perf_counter()
+    body_vertices = np.asarray(body_vertices, dtype=np.float32)
+    box = np.stack([garment.vertices.min(0), garment.vertices.max(0)])[None]
+    used, faces_c = crop_body(body_vertices[None], body_faces, box, config.crop_margin)
+    scene = _ClothScene(garment.vertices, garment.faces, garment.pinned, body_vertices[used], faces_c, fabric, config)
+    edges = unique_edges(garment.faces)
+    rest = np.linalg.norm(garment.vertices[edges[:, 1]] - garment.vertices[edges[:, 0]], axis=1)
+    t1 = time.perf_counter()
+    frames, info = _settle_loop(scene, config.max_settle_frames, config, edges, rest)
+    t2 = time.perf_counter()
+    info.update(
+        fabric=fabric.name,
+        build_seconds=t1 - t0,
+        seconds=t2 - t0,
+        seconds_per_frame=(t2 - t1) / max(len(frames), 1),
+        num_vertices=garment.num_vertices,
+        config=asdict(config),
+    )
+    if not info["settled"]:
+        log.info("settle: %s stopped after %d frames at mean speed %.4f m/s (aborted=%s)",
+                 fabric.name, info["frames"], info["final_speed"], info["aborted"])
+    return frames[-1].astype(np.float32), info
+
+
+def simulate_motion(
+    garment_vertices: np.ndarray,
+    garment_faces: np.ndarray,
+    pinned: np.ndarray,
+    body_frames: np.ndarray,
+    body_faces: np.ndarray,
+    pinned_targets: np.ndarray,
+    fabric: "str | Fabric",
+    config: SimConfig | None = None,
+) -> tuple[np.ndarray, dict[str, Any]]:
+    """Move the body through ``body_frames`` (T, Vb, 3; frame 0 = the pose the garment is settled on),
+    with the pinned vertices on ``pinned_targets`` (T, Np, 3), then hold the last pose and settle.
+
+    Returns frames (T', N, 3) float32 (frame 0 = the input garment; frames 1..T-1 the motion; the
+    rest the hold at the target pose until the speed threshold or ``max_hold_frames``) and an info
+    dict (``motion_frames`` = T, ``hold_frames``, ``final_speed``, ``settled``, timings, ``aborted``).
+    """
+    config = config or SimConfig()
+    fabric = get_fabric(fabric)
+    body_frames = np.asarray(body_frames, dtype=np.float32)
+    pinned = np.asarray(pinned, dtype=bool)
+    pinned_targets = np.asarray(pinned_targets, dtype=np.float32)
+    if body_frames.ndim != 3 or body_frames.shape[2] != 3 or len(body_frames) < 2:
+        raise ValueError(f"body_frames must be (T >= 2, Vb, 3), got {body_frames.shape}")
+    n_pin = int(pinned.sum())
+    if pinned_targets.shape != (len(body_frames), n_pin, 3):
+        raise ValueError(f"pinned_targets must be (T={len(body_frames)}, Np={n_pin}, 3), got {pinned_targets.shape}")
+    if not (np.isfinite(body_frames).all() and np.isfinite(pinned_targets).all()):
+        raise ValueError("body_frames / pinned_targets contain NaN/inf")
+    t0 = time.perf_counter()
+    gv = np.asarray(garment_vertices, dtype=np.float32)
+    # garment box at every frame: the input garment's box carried along by the pinned targets' mean motion
+    shift = pinned_targets.mean(axis=1) - pinned_targets[:1].mean(axis=1) if n_pin else np.zeros((len(body_frames), 3))
+    boxes = np.stack([gv.min(0) + shift, gv.max(0) + shift], axis=1)
+    used, faces_c = crop_body(body_frames, body_faces, boxes, config.crop_margin)
+    body_frames = np.ascontiguousarray(body_frames[:, used])
+    scene = _ClothScene(gv, garment_faces, pinned, body_frames[0], faces_c, fabric, config)
+    edges = unique_edges(garment_faces)
+    rest = np.linalg.norm(gv[edges[:, 1]] - gv[edges[:, 0]], axis=1)
+    t1 = time.perf_counter()
+    frames = [gv.copy()]
+    aborted = None
+    s = config.substeps
+    weights = (np.arange(1, s + 1, dtype=np.float32) / s)[:, None, None]
+    for k in range(1, len(body_frames)):
+        bodies = (1.0 - weights) * body_frames[k - 1] + weights * body_frames[k]
+        pins = (1.0 - weights) * pinned_targets[k - 1] + weights * pinned_targets[k]
+        for j in range(s):
+            scene.set_body(bodies[j])
+            scene.set_pins(pins[j])
+            scene.substep()
+        cur = scene.positions()
+        frames.append(cur)
+        if not np.isfinite(cur).all():
+            aborted = REJECT_NON_FINITE
+            break
+        if _edge_stretch(cur, edges, rest) > config.abort_stretch:
+            aborted = REJECT_OVERSTRETCHED
+            break
+    t2 = time.perf_counter()
+    hold_info: dict[str, Any] = {"frames": 0, "final_speed": float("nan"), "settled": False, "aborted": aborted}
+    if aborted is None:
+        hold, hold_info = _settle_loop(scene, config.max_hold_frames, config, edges, rest)
+        frames.extend(hold)
+    t3 = time.perf_counter()
+    out = np.stack(frames).astype(np.float32)
+    info = {
+        "fabric": fabric.name,
+        "motion_frames": len(body_frames),
+        "hold_frames": hold_info["frames"],
+        "final_speed": hold_info["final_speed"],
+        "settled": hold_info["settled"],
+        "aborted": hold_info["aborted"],
+        "build_seconds": t1 - t0,
+        "seconds": t3 - t0,
+        "seconds_per_frame": (t3 - t1) / max(len(frames) - 1, 1),
+        "motion_seconds": t2 - t1,
+        "num_vertices": len(gv),
+    }
+    if info["aborted"]:
+        log.warning("simulate_motion aborted (%s) after %d frames", info["aborted"], len(frames))
+    return out, info
+
+
+def mean_body_distance(vertices: np.ndarray, body_vertices: np.ndarray) -> float:
+    """Mean distance (m) from each garment vertex to its nearest body vertex."""
+    return float(nearest_vertices(vertices, body_vertices)[1].mean())
+
+
+def hem_fold_count(vertices: np.ndarray, loop: np.ndarray, center: np.ndarray) -> int:
+    """Folds along a hem loop: local maxima of the horizontal distance to ``center``, vertices ordered by angle."""
+    p = np.asarray(vertices, dtype=np.float64)[loop, :2] - np.asarray(center, dtype=np.float64)[:2]
+    r = np.linalg.norm(p, axis=1)[np.argsort(np.arctan2(p[:, 1], p[:, 0]))]
+    s = np.sign(np.diff(np.r_[r, r[0]]))
+    s = s[s != 0]
+    return int(np.count_nonzero(s != np.roll(s, 1)) // 2)
+
+
+def mean_fold_angle(vertices: np.ndarray, faces: np.ndarray) -> float:
+    """Mean dihedral fold angle (degrees) between adjacent faces: 0 for a flat sheet, larger when folded."""
+    n = face_normals(np.asarray(vertices, dtype=np.float64), faces)
+    fp = face_pairs(faces)
+    cos = np.clip(np.einsum("ij,ij->i", n[fp[:, 0]], n[fp[:, 1]]), -1.0, 1.0)
+    return float(np.degrees(np.arccos(cos)).mean())
+
+
+def rest_edge_lengths(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """Lengths of ``unique_edges(faces)`` on ``vertices`` (the rest lengths ``check_result`` compares to)."""
+    e = unique_edges(faces)
+    v = np.asarray(vertices, dtype=np.float64)
+    return np.linalg.norm(v[e[:, 1]] - v[e[:, 0]], axis=1)
+
+
+def inside_fraction(points: np.ndarray, body_vertices: np.ndarray, body_faces: np.ndarray) -> float:
+    """Fraction of ``points`` inside the body (warp winding-number test)."""
+    from garsim.geometry.inside import InsideTester
+
+    return float(np.mean(InsideTester(body_vertices, body_faces).inside(points)))
+
+
+def check_result(
+    frames: np.ndarray,
+    garment_faces: np.ndarray,
+    rest_edge_lengths: np.ndarray,
+    body_vertices: np.ndarray,
+    body_faces: np.ndarray,
+    max_stretch: float = 1.5,
+    max_inside: float = 0.01,
+) -> tuple[bool, str]:
+    """Accept or reject simulated frames (T, N, 3): returns (ok, "" or "<reason>: <detail>").
+
+    Rejects non-finite values, any edge longer than ``max_stretch`` x its rest length (edges in
+    ``unique_edges(garment_faces)`` order), or more than ``max_inside`` of the garment vertices
+    inside the body at any frame. ``body_vertices`` is (Vb, 3) for all frames or (T, Vb, 3).
+    The reason is logged.
+    """
+    frames = np.asarray(frames)
+    if frames.ndim == 2:
+        frames = frames[None]
+    edges = unique_edges(garment_faces)
+    rest = np.asarray(rest_edge_lengths, dtype=np.float64)
+    if rest.shape != (len(edges),):
+        raise ValueError(f"rest_edge_lengths has shape {rest.shape}, expected ({len(edges)},) = unique_edges(faces)")
+    body = np.asarray(body_vertices)
+    if body.ndim == 3 and len(body) != len(frames):
+        raise ValueError(f"body_vertices has {len(body)} frames, garment has {len(frames)}")
+
+    def reject(reason: str, detail: str) -> tuple[bool, str]:
+        msg = f"{reason}: {detail}"
+        log.warning("simulation rejected: %s", msg)
+        return False, msg
+
+    finite = np.isfinite(frames).all(axis=(1, 2))
+    if not finite.all():
+        return reject(REJECT_NON_FINITE, f"NaN/inf at frame {int(np.argmin(finite))}")
+    d = frames[:, edges[:, 1]] - frames[:, edges[:, 0]]
+    ratio = np.linalg.norm(d, axis=2) / np.maximum(rest, 1e-12)[None]
+    worst = float(ratio.max())
+    if worst > max_stretch:
+        t, e = np.unravel_index(int(np.argmax(ratio)), ratio.shape)
+        return reject(REJECT_OVERSTRETCHED,
+                      f"edge {int(e)} at frame {int(t)} stretched {worst:.2f}x rest (limit {max_stretch}x)")
+    from garsim.geometry.inside import InsideTester
+
+    tester = InsideTester(body[0] if body.ndim == 3 else body, body_faces)
+    for t in range(len(frames)):
+        if body.ndim == 3 and t > 0:
+            tester.update(body[t])
+        frac = float(np.mean(tester.inside(frames[t])))
+        if frac > max_inside:
+            return reject(REJECT_PENETRATION,
+                          f"{100 * frac:.2f}% of garment vertices inside the body at frame {t} "
+                          f"(limit {100 * max_inside:.1f}%)")
+    return True, ""
+
+
+def ensure_ok(ok_reason: tuple[bool, str]) -> None:
+    """Raise ``SimulationRejected`` for a failed ``check_result``."""
+    ok, msg = ok_reason
+    if not ok:
+        reason, _, detail = msg.partition(": ")
+        raise SimulationRejected(reason, detail)
