@@ -6,7 +6,7 @@ import torch
 from model_fixtures import make_sample, rot_z, transform_sample
 
 from garsim.data.sample import FABRICS
-from garsim.geometry.mesh import directed_edges, face_pairs
+from garsim.geometry.mesh import face_pairs
 from garsim.model.config import GarSimConfig
 from garsim.model.inputs import body_yaw_frame, build_graph, collate, semantic_vector
 

@@ -119,7 +119,6 @@ def test_crop_body_keeps_faces_near_the_garment_at_any_frame():
 newton = pytest.importorskip("newton")
 
 from garsim.garments.templates import make_garment  # noqa: E402
-from garsim.geometry.proximity import nearest_vertices  # noqa: E402
 from garsim.physics.newton_sim import inside_fraction, settle, simulate_motion  # noqa: E402
 from garsim.physics.newton_sim import hem_fold_count, mean_body_distance, mean_fold_angle  # noqa: E402
 

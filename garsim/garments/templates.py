@@ -126,7 +126,6 @@ class TemplateBody:
         v, p = self.vertices, self.parts
         torso = p == PART_TORSO
         legs = (p == PART_LEG_L) | (p == PART_LEG_R)
-        arm_l = p == PART_ARM_L
         self.x_mid = float(np.median(v[torso, 0]))
         # crotch: the lowest torso/leg vertex on the mid-plane (legs do not cross it below the crotch)
         mid = (torso | legs) & (np.abs(v[:, 0] - self.x_mid) < 0.012)

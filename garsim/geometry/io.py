@@ -22,12 +22,12 @@ faces +Z as glTF expects) and ``load_mesh(..., y_up=True)`` rotates back.
 from __future__ import annotations
 
 import os
-import tempfile
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from garsim.atomic import atomic_write_bytes
 SUPPORTED_EXTENSIONS: tuple[str, ...] = (".obj", ".ply", ".glb", ".gltf", ".off", ".stl")
 """File types :func:`load_mesh` reads; :func:`save_mesh` writes all but ``.gltf``."""
 
@@ -222,17 +222,7 @@ def save_mesh(
     if ext == ".obj":
         export_kwargs.update(include_normals=False, include_texture=False, digits=8)
     data = mesh.export(file_type=ext[1:], **export_kwargs)
-    p.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{p.name}.", suffix=".tmp", dir=p.parent)
-    try:
-        with os.fdopen(fd, "wb") as fh:
-            fh.write(data.encode("utf-8") if isinstance(data, str) else data)
-        os.replace(tmp, p)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
-    return p
+    return atomic_write_bytes(p, data.encode("utf-8") if isinstance(data, str) else data)
 
 
 def as_mesh(obj: Any, name: str | None = None) -> tuple[np.ndarray, np.ndarray]:

@@ -16,7 +16,6 @@ from __future__ import annotations
 
 import math
 import os
-import tempfile
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -24,6 +23,7 @@ from typing import Any
 
 import numpy as np
 
+from garsim.atomic import atomic_write
 from garsim.geometry.mesh import vertex_normals
 
 VIEW_AZIMUTHS: dict[str, float] = {"front": 0.0, "side": 90.0, "left": 90.0, "back": 180.0, "right": 270.0}
@@ -352,16 +352,7 @@ def _render(
 
 
 def _atomic_savefig(fig: Any, path: Path, dpi: float) -> None:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp.png", dir=path.parent)
-    os.close(fd)
-    try:
-        fig.savefig(tmp, dpi=dpi, format="png", facecolor="white")
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
+    atomic_write(path, lambda tmp: fig.savefig(tmp, dpi=dpi, format="png", facecolor="white"))
 
 
 def _check_png(path: str | os.PathLike) -> Path:

@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-import os
-import tempfile
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -13,6 +11,7 @@ from safetensors.torch import load_file, save_file
 from torch import nn
 from torch_geometric.data import Data
 
+from garsim.atomic import atomic_write
 from garsim.data.sample import FABRICS, Sample
 from garsim.model.config import GarSimConfig
 from garsim.model.decoder import Decoder
@@ -99,8 +98,8 @@ class GarSimModel(nn.Module):
         d = Path(directory)
         d.mkdir(parents=True, exist_ok=True)
         state = {k: v.detach().contiguous().cpu() for k, v in self.state_dict().items()}
-        _atomic(d / WEIGHTS_FILE, lambda p: save_file(state, str(p), metadata={"format": "garsim"}))
-        _atomic(d / CONFIG_FILE, lambda p: Path(p).write_text(self.config.to_json()))
+        atomic_write(d / WEIGHTS_FILE, lambda p: save_file(state, str(p), metadata={"format": "garsim"}))
+        atomic_write(d / CONFIG_FILE, lambda p: Path(p).write_text(self.config.to_json()))
         return d
 
     @classmethod
@@ -116,18 +115,6 @@ class GarSimModel(nn.Module):
             raise ValueError(f"weights in {d} do not match the config: missing {missing[:5]}, unexpected {unexpected[:5]}")
         model.eval()
         return model
-
-
-def _atomic(path: Path, write) -> None:
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=path.name + ".", suffix=".tmp")
-    os.close(fd)
-    try:
-        write(tmp)
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.remove(tmp)
-        raise
 
 
 __all__ = ["GarSimModel", "GarSimConfig", "node_batch", "WEIGHTS_FILE", "CONFIG_FILE"]

@@ -29,7 +29,8 @@ from torch.utils.data.distributed import DistributedSampler
 
 from garsim.data.sample import Sample
 from garsim.model.config import GarSimConfig
-from garsim.model.garsim import GarSimModel, _atomic
+from garsim.atomic import atomic_write
+from garsim.model.garsim import GarSimModel
 from garsim.model.inputs import GarmentGraph, build_graph, collate
 from garsim.train.losses import LossWeights, euclidean_error_mm, garsim_loss
 
@@ -330,7 +331,7 @@ class Trainer:
                 else:
                     scalars[f"state.{pid}.{key}"] = val
         tensors["rng.torch"] = torch.get_rng_state()
-        _atomic(d / "optimizer.safetensors", lambda p: save_file(tensors, str(p)))
+        atomic_write(d / "optimizer.safetensors", lambda p: save_file(tensors, str(p)))
         state = {
             "epoch": self.epoch,
             "step": self.step,
@@ -342,7 +343,7 @@ class Trainer:
             "history": self.history,
             "train_config": self.cfg.to_dict(),
         }
-        _atomic(d / "trainer_state.json", lambda p: Path(p).write_text(json.dumps(state, indent=1)))
+        atomic_write(d / "trainer_state.json", lambda p: Path(p).write_text(json.dumps(state, indent=1)))
         return d
 
     def load_checkpoint(self, directory: str | Path) -> None:
