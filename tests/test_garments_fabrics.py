@@ -17,10 +17,10 @@ def test_table_matches_the_one_hot_order():
 
 
 def test_bending_and_density_increase_from_silk_to_leather():
-    # Bending stiffness is the lever that separates drapes (DESIGN.md); it spans >= 10x per step.
+    # Bending stiffness is the lever that separates drapes (DESIGN.md); it grows >= 3x per step.
     ladder = [FABRICS[n] for n in ("silk", "cotton", "denim", "leather")]
     for a, b in zip(ladder, ladder[1:]):
-        assert b.edge_ke >= 10 * a.edge_ke
+        assert b.edge_ke >= 3 * a.edge_ke
         assert b.density > a.density
         assert b.tri_ke >= a.tri_ke
 
