@@ -826,8 +826,14 @@ def _strapped_torso(
     return rings, straps, info
 
 
-def _strap_pins(n: int, straps: dict, lo: float = 0.3, hi: float = 0.7) -> np.ndarray:
+def _strap_pins(
+    n: int, straps: dict, lo: float = 0.3, hi: float = 0.7, neckline: np.ndarray | None = None
+) -> np.ndarray:
+    """Pins: the middle of each strap / shoulder panel and, for bodices, their top ring: an elastic
+    band that keeps the bodice from sliding down (straps alone stretch: VBD at a few iterations is soft)."""
     pinned = np.zeros(n, dtype=bool)
+    if neckline is not None:
+        pinned[np.asarray(neckline, dtype=np.int64).ravel()] = True
     for grid in straps.values():
         r = len(grid)
         sel = np.arange(r)
@@ -842,8 +848,9 @@ def _build_top(body: TemplateBody, p: TopParams, h: float) -> tuple[_Mesh, np.nd
     mesh = _Mesh()
     xs = 0.5 * (body.neck_halfwidth + body.shoulder_x)
     x_in, x_out = xs - p.strap_width / 2, xs + p.strap_width / 2
-    _, straps, _ = _strapped_torso(body, mesh, h, z_top, z_bot, x_in, x_out, _BodyRadius(p.looseness), p.looseness)
-    return mesh, _strap_pins(mesh.n, straps)
+    rings, straps, _ = _strapped_torso(body, mesh, h, z_top, z_bot, x_in, x_out, _BodyRadius(p.looseness),
+                                       p.looseness)
+    return mesh, _strap_pins(mesh.n, straps, neckline=rings[0])
 
 
 def _build_dress(body: TemplateBody, p: DressParams, h: float) -> tuple[_Mesh, np.ndarray]:
@@ -854,8 +861,8 @@ def _build_dress(body: TemplateBody, p: DressParams, h: float) -> tuple[_Mesh, n
     xs = 0.5 * (body.neck_halfwidth + body.shoulder_x)
     x_in, x_out = xs - p.strap_width / 2, xs + p.strap_width / 2
     radius = _SkirtRadius(body.z_hip, p.looseness, p.flare, body.z_waist)
-    _, straps, _ = _strapped_torso(body, mesh, h, z_top, z_bot, x_in, x_out, radius, p.looseness)
-    return mesh, _strap_pins(mesh.n, straps)
+    rings, straps, _ = _strapped_torso(body, mesh, h, z_top, z_bot, x_in, x_out, radius, p.looseness)
+    return mesh, _strap_pins(mesh.n, straps, neckline=rings[0])
 
 
 def _build_tshirt(body: TemplateBody, p: TShirtParams, h: float) -> tuple[_Mesh, np.ndarray]:
