@@ -106,7 +106,7 @@ class EdgeEncoder(nn.Module):
     def __init__(self, cfg: GarSimConfig):
         super().__init__()
         self.scale = float(cfg.pos_scale)
-        self.mlp = MLP(6, cfg.edge_latent, cfg.edge_latent, cfg.mlp_layers, cfg.activation)
+        self.mlp = MLP(6, cfg.edge_latent, cfg.edge_latent, cfg.mlp_layers, cfg.activation, cfg.edge_layer_norm)
 
     def forward(self, edge_attr: torch.Tensor) -> torch.Tensor:
         return self.mlp(edge_attr * self.scale)

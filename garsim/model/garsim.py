@@ -58,7 +58,7 @@ class GarSimModel(nn.Module):
         the body-frame displacement, direction and magnitude."""
         batch = node_batch(data)
         x_gar = self.geometry(data.gar_rel)
-        x_body = self.geometry(data.body_rel)
+        x_body = self.geometry(data.body_rel).index_select(0, data.q_slot)  # per distinct q -> per vertex
         s = self.semantic(data.sem)[batch]
         chi = self.garment_encoder(x_gar, data.fabric, data.p, data.p_prior)
         mu = self.body_encoder(x_body, data.delta, s)
@@ -74,20 +74,22 @@ class GarSimModel(nn.Module):
         return pred
 
     # -- convenience ------------------------------------------------------------------------
-    @torch.no_grad()
     def predict(self, sample: Sample | Sequence[Sample]) -> np.ndarray | list[np.ndarray]:
         """Sample(s) in memory -> predicted garment vertices (float32 numpy), graph built here."""
         was_training = self.training
-        self.eval()
+        if was_training:  # .train()/.eval() walk every module: skip when already in eval mode
+            self.eval()
         try:
-            if isinstance(sample, Sample):
-                return self(build_graph(sample, self.config)).numpy()
-            graphs = [build_graph(s, self.config) for s in sample]
-            batch = collate(graphs)
-            pred = self(batch)
-            return [t.numpy() for t in torch.split(pred, [g.num_nodes for g in graphs])]
+            with torch.inference_mode():
+                if isinstance(sample, Sample):
+                    return self(build_graph(sample, self.config, loss_inputs=False)).numpy()
+                graphs = [build_graph(s, self.config, loss_inputs=False) for s in sample]
+                batch = collate(graphs)
+                pred = self(batch)
+                return [t.numpy() for t in torch.split(pred, [g.num_nodes for g in graphs])]
         finally:
-            self.train(was_training)
+            if was_training:
+                self.train()
 
     def num_parameters(self) -> int:
         """Number of trainable parameters."""

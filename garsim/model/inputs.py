@@ -3,9 +3,11 @@
 Per garment vertex i: q_i (canonical body vertex nearest G_i, KD-tree), δ_i = B̄_q − B_q,
 p_i = G_i − B_q, p^prior_i = G^prior_i − B̄_q, fabric one-hot f, pinned flag; per directed
 mesh edge (i -> j): E_ij = G_j − G_i and E^prior_ij; local neighbourhoods for the geometry
-encoder (k nearest garment vertices of G_i, and the k body vertices nearest G_i, both as
-positions relative to their centre, G_i resp. B_q); the garment-aware body-semantic input
-(binary mask over the body vertices in q); faces and face pairs for the losses.
+encoder (k nearest garment vertices of G_i relative to G_i; and, once per distinct q, the
+body vertex q with its body-mesh 1-ring relative to B_q, i.e. the body's geometry "at q_i");
+the garment-aware body-semantic input (binary mask over the body vertices in q); faces and
+face pairs for the losses. Everything about the canonical body alone (KD-tree, yaw frame,
+rings) is computed once per body and cached by content (see ``body_frame``).
 
 Frame: all vectors are expressed in a body frame (rotation ``rot``, world -> frame) whose
 yaw comes from the canonical body alone (see ``body_yaw_frame``), so a rotation of the whole
@@ -25,26 +27,84 @@ from scipy.spatial import cKDTree
 from torch_geometric.data import Batch, Data
 
 from garsim.data.sample import FABRICS, Sample
-from garsim.geometry.mesh import directed_edges, face_pairs, vertex_normals
+from garsim.geometry.mesh import directed_edges, face_pairs, unique_edges, vertex_normals
 from garsim.model.config import GarSimConfig
 
+_CACHE_SIZE = 8
 _TREE_CACHE: OrderedDict[tuple, cKDTree] = OrderedDict()
-_TREE_CACHE_SIZE = 8
+_BODY_CACHE: OrderedDict[tuple, "BodyFrame"] = OrderedDict()
+
+
+def _content_key(arr: np.ndarray) -> tuple:
+    """Cache key from an array's content (shape, dtype and a hash of its bytes): safe under mutation."""
+    return (arr.shape, arr.dtype.str, hash(arr.tobytes()))
+
+
+def _lru_get(cache: OrderedDict, key: tuple, make):
+    value = cache.get(key)
+    if value is None:
+        value = cache[key] = make()
+        if len(cache) > _CACHE_SIZE:
+            cache.popitem(last=False)
+    else:
+        cache.move_to_end(key)
+    return value
 
 
 def cached_tree(points: np.ndarray) -> cKDTree:
     """KD-tree over ``points``, cached by content (bodies are reused across garments and frames)."""
     arr = np.ascontiguousarray(points)
-    key = (arr.shape, arr.dtype.str, hash(arr.tobytes()))
-    tree = _TREE_CACHE.get(key)
-    if tree is None:
-        tree = cKDTree(arr)
-        _TREE_CACHE[key] = tree
-        if len(_TREE_CACHE) > _TREE_CACHE_SIZE:
-            _TREE_CACHE.popitem(last=False)
-    else:
-        _TREE_CACHE.move_to_end(key)
-    return tree
+    return _lru_get(_TREE_CACHE, _content_key(arr), lambda: cKDTree(arr))
+
+
+class BodyFrame:
+    """Everything about one canonical body that does not depend on the garment, computed once.
+
+    KD-tree, yaw frame ``rot`` (world -> body frame, identity without ``canonicalize_yaw``),
+    the body's vertices in that frame, and (lazily) each body vertex's mesh neighbourhood,
+    the point set the geometry encoder sees at ``q``.
+    """
+
+    def __init__(self, body_canonical: np.ndarray, faces: np.ndarray, canonicalize_yaw: bool):
+        self.vertices = np.ascontiguousarray(body_canonical, dtype=np.float32)
+        self.faces = np.asarray(faces, dtype=np.int64)
+        self.tree = cached_tree(self.vertices)
+        rot = body_yaw_frame(self.vertices) if canonicalize_yaw else np.eye(3)
+        self.rot = rot.astype(np.float32)
+        self.framed = self.vertices @ self.rot.T
+        self._rings: dict[int, np.ndarray] = {}
+
+    def ring(self, k: int) -> np.ndarray:
+        """(Vb, k) each body vertex itself, then its 1-ring neighbours (by index), padded with itself.
+
+        Mesh connectivity, not Euclidean kNN: distance ties on the body's regular mesh would make
+        a kNN set flip under float rounding of a moved scene; the ring (and its order) is exactly
+        invariant. Anny's valence is at most 8, so k = 9 keeps whole rings; on bodies with larger
+        valence the ring is cut to the k - 1 lowest-index neighbours.
+        """
+        if k not in self._rings:
+            v = len(self.vertices)
+            tab = np.repeat(np.arange(v, dtype=np.int64)[:, None], k, axis=1)
+            if k > 1 and len(self.faces):
+                e = unique_edges(self.faces)
+                src = np.concatenate([e[:, 0], e[:, 1]])
+                dst = np.concatenate([e[:, 1], e[:, 0]])
+                order = np.lexsort((dst, src))
+                src, dst = src[order], dst[order]
+                start = np.searchsorted(src, np.arange(v))
+                rank = np.arange(len(src)) - start[src]
+                keep = rank < k - 1
+                tab[src[keep], 1 + rank[keep]] = dst[keep]
+            self._rings[k] = tab
+        return self._rings[k]
+
+
+def body_frame(body_canonical: np.ndarray, faces: np.ndarray, canonicalize_yaw: bool = True) -> BodyFrame:
+    """The cached BodyFrame of a canonical body (keyed by its content, so edits are never stale)."""
+    arr = np.ascontiguousarray(body_canonical, dtype=np.float32)
+    f = np.ascontiguousarray(faces, dtype=np.int64)
+    key = _content_key(arr) + _content_key(f) + (bool(canonicalize_yaw),)
+    return _lru_get(_BODY_CACHE, key, lambda: BodyFrame(arr, f, canonicalize_yaw))
 
 
 def body_yaw_frame(body_canonical: np.ndarray) -> np.ndarray:
@@ -136,6 +196,8 @@ class GarmentGraph(Data):
             return self.num_nodes
         if key == "face_pairs":
             return int(self.faces.shape[0])
+        if key == "q_slot":
+            return int(self.body_rel.shape[0])
         if key == "col_batch":
             return 1
         return 0
@@ -151,12 +213,16 @@ def build_graph(
     config: GarSimConfig | None = None,
     *,
     with_collision: bool = False,
+    loss_inputs: bool = True,
     name: str | None = None,
 ) -> GarmentGraph:
     """One Sample -> a GarmentGraph with every Eq. 2 input (and the target, if the sample has one).
 
     ``with_collision`` adds the target-body vertices near the garment and their normals
-    (``col_body``, ``col_normal``, ``col_batch``) for the collision loss.
+    (``col_body``, ``col_normal``, ``col_batch``) for the collision loss; ``loss_inputs=False``
+    (inference) skips the face pairs only the losses need. The body geometry neighbourhoods
+    ``body_rel`` are stored once per distinct q (``q_slot`` maps each vertex to its row), and
+    edges are sorted by receiver.
     """
     cfg = config or GarSimConfig()
     body_c = np.asarray(sample.body_canonical, dtype=np.float32)
@@ -172,57 +238,60 @@ def build_graph(
     if not (np.isfinite(g).all() and np.isfinite(prior).all() and np.isfinite(body_c).all() and np.isfinite(body_t).all()):
         raise ValueError(f"sample {name or ''} has non-finite positions (garment, prior or bodies): fix the data")
 
-    # nearest canonical body vertices: q_i and the body neighbourhood of G_i
-    kb = min(cfg.knn_body, len(body_c))
-    _, bidx = cached_tree(body_c).query(g, k=kb)
-    bidx = np.asarray(bidx, dtype=np.int64).reshape(n, kb)
-    if kb < cfg.knn_body:
-        bidx = np.concatenate([bidx, np.repeat(bidx[:, :1], cfg.knn_body - kb, axis=1)], axis=1)
-    q = bidx[:, 0]
+    # nearest canonical body vertex q_i (KD-tree of the body, cached per body)
+    body = body_frame(body_c, sample.body_faces, cfg.canonicalize_yaw)
+    _, q = body.tree.query(g, k=1)
+    q = np.asarray(q, dtype=np.int64).reshape(n)
+    r32 = body.rot
 
-    rot = body_yaw_frame(body_c) if cfg.canonicalize_yaw else np.eye(3)
-    r32 = rot.astype(np.float32)
-
-    def frame(v: np.ndarray) -> np.ndarray:
-        return v @ r32.T
-
-    bq, bq_t = body_c[q], body_t[q]
-    p = frame(g - bq)
-    p_prior = frame(prior - bq_t)
-    delta = frame(bq_t - bq)
-    body_rel = frame(body_c[bidx] - bq[:, None, :])
+    # every vector in the body frame: rotate the points once, then subtract
+    gf = g @ r32.T
+    pf = prior @ r32.T
+    bq = body.framed[q]
+    bq_t = body_t[q]
+    bq_tf = bq_t @ r32.T
+    p = gf - bq
+    p_prior = pf - bq_tf
+    delta = bq_tf - bq
+    # body neighbourhoods (X^body at q): each distinct q and its mesh 1-ring, relative to B_q
+    uq, q_slot = np.unique(q, return_inverse=True)
+    nbr = body.ring(cfg.knn_body)[uq]
+    body_rel = body.framed[nbr] - body.framed[uq][:, None, :]
     gidx = _knn_self(g, cfg.knn_garment)
-    gar_rel = frame(g[gidx] - g[:, None, :])
+    gar_rel = gf[gidx] - gf[:, None, :]
 
     ei = directed_edges(faces)
-    s, r = ei[0], ei[1]
-    edge_attr = np.concatenate([frame(g[r] - g[s]), frame(prior[r] - prior[s])], axis=1)
+    ei = ei[:, np.argsort(ei[1], kind="stable")]  # receiver-sorted: aggregation is a CSR product
+    snd, rcv = ei[0], ei[1]
+    edge_attr = np.concatenate([gf[rcv] - gf[snd], pf[rcv] - pf[snd]], axis=1)
 
     fab = np.zeros((n, len(FABRICS)), dtype=np.float32)
     fab[:, sample.fabric_index] = 1.0
-    sem = semantic_vector(body_c @ rot.T if cfg.canonicalize_yaw else body_c, q, cfg)
+    sem = semantic_vector(body.framed, uq, cfg)
 
     data = GarmentGraph(
         num_nodes=n,
         pos=torch.from_numpy(g.copy()),
         prior=torch.from_numpy(prior.copy()),
-        anchor=torch.from_numpy(bq_t.copy()),
+        anchor=torch.from_numpy(bq_t),
         p=torch.from_numpy(p),
         p_prior=torch.from_numpy(p_prior),
         delta=torch.from_numpy(delta),
         fabric=torch.from_numpy(fab),
         pinned=torch.from_numpy(np.asarray(sample.pinned, dtype=bool).copy()),
-        gar_rel=torch.from_numpy(np.ascontiguousarray(gar_rel)),
-        body_rel=torch.from_numpy(np.ascontiguousarray(body_rel)),
-        edge_index=torch.from_numpy(ei),
-        edge_attr=torch.from_numpy(np.ascontiguousarray(edge_attr)),
+        gar_rel=torch.from_numpy(gar_rel),
+        body_rel=torch.from_numpy(body_rel),
+        q_slot=torch.from_numpy(q_slot.reshape(n).astype(np.int64)),
+        edge_index=torch.from_numpy(np.ascontiguousarray(ei)),
+        edge_attr=torch.from_numpy(edge_attr),
         faces=torch.from_numpy(faces.copy()),
-        face_pairs=torch.from_numpy(face_pairs(faces)),
         sem=torch.from_numpy(sem)[None],
         rot=torch.from_numpy(r32.copy())[None],
         q=torch.from_numpy(q),
         name=name if name is not None else str(sample.meta.get("name", "")),
     )
+    if loss_inputs:
+        data.face_pairs = torch.from_numpy(face_pairs(faces))
     if sample.target is not None:
         if not np.isfinite(sample.target).all():
             raise ValueError(f"sample {data.name!r} has a non-finite target (ground truth): fix or drop it")

@@ -3,13 +3,22 @@
 Each step: edge update Ψ_edge(π_k, η_{r_k}, η_{s_k}) for every edge, aggregation
 Ω_edge->node of the updated edges at their receiver (mean, as the paper; any PyG
 aggregation by name), node update Ψ_node(π̄'_i, η_i). Both updates are MLPs; as in
-MeshGraphNets (Pfaff et al. 2021) each MLP ends in a LayerNorm and its output is added to
-its input (residual connection); both can be switched off in the config.
+MeshGraphNets (Pfaff et al. 2021) each MLP can end in a LayerNorm (``layer_norm`` for the
+node update, ``edge_layer_norm`` for the edge update) and its output is added to its input
+(residual connection, ``residual``).
+
+Speed (CPU inference is the target): the edge MLP's first layer is split per input so node
+terms are projected once per node and gathered with ``index_select``; the mean aggregation
+is one sparse CSR product with weights 1/deg built once per forward (not per step); without
+gradients the activations run in place.
 """
 
 from __future__ import annotations
 
+import warnings
+
 import torch
+import torch.nn.functional as F
 from torch import nn
 from torch_geometric.nn.resolver import aggregation_resolver
 
@@ -17,30 +26,85 @@ from garsim.model.config import GarSimConfig
 from garsim.model.encoders import MLP, activation
 
 
+class MeanAggregator:
+    """Mean of edge values at their receiver, precomputed for one edge_index (reused by all L steps)."""
+
+    def __init__(self, receivers: torch.Tensor, num_nodes: int):
+        e = receivers.shape[0]
+        if e > 1 and not bool((receivers[1:] >= receivers[:-1]).all()):
+            order = torch.argsort(receivers, stable=True)
+        else:
+            order = None
+        counts = torch.bincount(receivers, minlength=num_nodes)
+        self.num_nodes = num_nodes
+        self.receivers = receivers
+        self.inv_deg = 1.0 / counts.clamp(min=1).to(torch.float32)
+        self._csr: torch.Tensor | None = None
+        self._order = order
+        self._counts = counts
+
+    def csr(self) -> torch.Tensor:
+        """(N, E) sparse CSR matrix with 1/deg(receiver) at (receiver, edge)."""
+        if self._csr is None:
+            crow = torch.zeros(self.num_nodes + 1, dtype=torch.long)
+            torch.cumsum(self._counts, 0, out=crow[1:])
+            e = self.receivers.shape[0]
+            col = self._order if self._order is not None else torch.arange(e)
+            val = self.inv_deg.index_select(0, self.receivers.index_select(0, col))
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore", UserWarning)  # "sparse CSR support is in beta"
+                self._csr = torch.sparse_csr_tensor(crow, col, val, (self.num_nodes, e), check_invariants=False)
+        return self._csr
+
+    def __call__(self, edge_values: torch.Tensor) -> torch.Tensor:
+        if torch.is_grad_enabled() and edge_values.requires_grad:  # training: plain index_add (cheap backward)
+            out = edge_values.new_zeros(self.num_nodes, edge_values.shape[1]).index_add_(0, self.receivers, edge_values)
+            return out * self.inv_deg[:, None]
+        return self.csr() @ edge_values
+
+
 class EdgeUpdate(nn.Module):
     """Ψ_edge: MLP on [π_k, η_{r_k}, η_{s_k}].
 
     The first linear layer of the concatenation is split into three (mathematically the
-    same layer) so the node terms are projected once per node, not once per edge.
+    same layer; its bias lives in ``lin_recv``) so the node terms are projected once per
+    node, not once per edge.
     """
 
     def __init__(self, cfg: GarSimConfig):
         super().__init__()
         h, d = cfg.edge_latent, cfg.edge_latent  # edge MLP hidden width = edge latent width
-        self.lin_edge = nn.Linear(d, h)
-        self.lin_recv = nn.Linear(cfg.latent, h, bias=False)
+        self.lin_edge = nn.Linear(d, h, bias=False)
+        self.lin_recv = nn.Linear(cfg.latent, h)
         self.lin_send = nn.Linear(cfg.latent, h, bias=False)
-        mods: list[nn.Module] = [activation(cfg.activation)]
+        self.act_name = cfg.activation
+        mods: list[nn.Module] = []
         for _ in range(cfg.mlp_layers - 1):
             mods += [nn.Linear(h, h), activation(cfg.activation)]
         mods.append(nn.Linear(h, d))
-        if cfg.layer_norm:
+        if cfg.edge_layer_norm:
             mods.append(nn.LayerNorm(d))
         self.rest = nn.Sequential(*mods)
 
     def forward(self, edge: torch.Tensor, node: torch.Tensor, senders: torch.Tensor, receivers: torch.Tensor) -> torch.Tensor:
-        hid = self.lin_edge(edge) + self.lin_recv(node)[receivers] + self.lin_send(node)[senders]
+        hid = self.lin_recv(node).index_select(0, receivers)
+        hid = hid + self.lin_send(node).index_select(0, senders)
+        hid = torch.addmm(hid, edge, self.lin_edge.weight.t())
+        if torch.is_grad_enabled():
+            hid = _act(self.act_name, hid, inplace=False)
+        else:
+            hid = _act(self.act_name, hid, inplace=True)
         return self.rest(hid)
+
+
+def _act(name: str, x: torch.Tensor, inplace: bool) -> torch.Tensor:
+    if name == "relu":
+        return F.relu(x, inplace=inplace)
+    if name == "silu":
+        return F.silu(x, inplace=inplace)
+    if name == "gelu":
+        return F.gelu(x)
+    raise ValueError(f"unknown activation {name!r}")
 
 
 class MessagePassingStep(nn.Module):
@@ -50,13 +114,19 @@ class MessagePassingStep(nn.Module):
         super().__init__()
         self.edge_update = EdgeUpdate(cfg)
         self.node_update = MLP(cfg.latent + cfg.edge_latent, cfg.mlp_hidden, cfg.latent, cfg.mlp_layers, cfg.activation, cfg.layer_norm)
-        self.aggregate = aggregation_resolver(cfg.aggregation)
+        self.mean = cfg.aggregation == "mean"
+        self.aggregate = None if self.mean else aggregation_resolver(cfg.aggregation)
         self.residual = cfg.residual
 
-    def forward(self, node: torch.Tensor, edge: torch.Tensor, edge_index: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    def forward(
+        self, node: torch.Tensor, edge: torch.Tensor, edge_index: torch.Tensor, mean: MeanAggregator | None = None
+    ) -> tuple[torch.Tensor, torch.Tensor]:
         senders, receivers = edge_index[0], edge_index[1]
         new_edge = self.edge_update(edge, node, senders, receivers)
-        agg = self.aggregate(new_edge, receivers, dim_size=node.shape[0])
+        if self.mean:
+            agg = (mean or MeanAggregator(receivers, node.shape[0]))(new_edge)
+        else:
+            agg = self.aggregate(new_edge, receivers, dim_size=node.shape[0])
         new_node = self.node_update(torch.cat([agg, node], dim=-1))
         if self.residual:
             return node + new_node, edge + new_edge
@@ -71,8 +141,10 @@ class Processor(nn.Module):
         self.num_steps = cfg.num_steps
         n_blocks = 1 if (cfg.share_weights and cfg.num_steps > 0) else cfg.num_steps
         self.steps = nn.ModuleList([MessagePassingStep(cfg) for _ in range(n_blocks)])
+        self.mean = cfg.aggregation == "mean"
 
     def forward(self, node: torch.Tensor, edge: torch.Tensor, edge_index: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        mean = MeanAggregator(edge_index[1], node.shape[0]) if (self.mean and self.num_steps > 0) else None
         for l in range(self.num_steps):
-            node, edge = self.steps[l % len(self.steps)](node, edge, edge_index)
+            node, edge = self.steps[l % len(self.steps)](node, edge, edge_index, mean)
         return node, edge
