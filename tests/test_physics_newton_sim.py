@@ -67,6 +67,12 @@ def test_check_result_rejects_a_stretched_edge(icosphere):
     fine[15] += [0.04, 0.0, 0.0]  # 1.4x: accepted
     assert check_result(fine, f, rest_edge_lengths(v, f), bv, bf)[0]
     assert len(edges) == len(rest_edge_lengths(v, f))
+    # edges between two pinned vertices follow the body, not the solver: not tested
+    pinned = np.zeros(len(v), dtype=bool)
+    pinned[15] = True
+    assert not check_result(np.stack([v, bad]), f, rest_edge_lengths(v, f), bv, bf, pinned=pinned)[0]
+    pinned[np.unique(edges[(edges == 15).any(axis=1)])] = True
+    assert check_result(np.stack([v, bad]), f, rest_edge_lengths(v, f), bv, bf, pinned=pinned)[0]
 
 
 def test_check_result_rejects_penetration_over_one_percent(icosphere):

@@ -226,12 +226,12 @@ class SkirtParams(_Params):
 class TopParams(_Params):
     """Tank top: tube from below the armpits down by ``length``, two straps over the shoulders."""
 
-    length: float = 0.42
+    length: float = 0.35
     looseness: float = 0.02
     strap_width: float = 0.035
     armpit_clearance: float = 0.045
     RANGES: ClassVar[dict[str, tuple[float, float, float, float]]] = {
-        "length": (0.15, 0.8, 0.3, 0.55),
+        "length": (0.15, 0.8, 0.22, 0.42),  # sampled: hem between the waist and the hips
         "looseness": (0.01, 0.08, 0.015, 0.04),
         "strap_width": (0.015, 0.06, 0.025, 0.05),
         "armpit_clearance": (0.03, 0.1, 0.04, 0.06),
@@ -826,14 +826,19 @@ def _strapped_torso(
     return rings, straps, info
 
 
-def _strap_pins(
-    n: int, straps: dict, lo: float = 0.3, hi: float = 0.7, neckline: np.ndarray | None = None
-) -> np.ndarray:
-    """Pins: the middle of each strap / shoulder panel and, for bodices, their top ring: an elastic
-    band that keeps the bodice from sliding down (straps alone stretch: VBD at a few iterations is soft)."""
+def _band_pins(n: int, ring: np.ndarray) -> np.ndarray:
+    """Pins of a strapped bodice: its top ring, an elastic band that holds it up.
+
+    Pinning the strap middles instead fails in simulation: the straps stand off the shoulders, so
+    their skinning weights come partly from the upper arm and the pinned targets stretch the straps
+    up to 2x when the arms move (and straps alone, at a few VBD iterations, let the bodice slide)."""
     pinned = np.zeros(n, dtype=bool)
-    if neckline is not None:
-        pinned[np.asarray(neckline, dtype=np.int64).ravel()] = True
+    pinned[np.asarray(ring, dtype=np.int64).ravel()] = True
+    return pinned
+
+
+def _strap_pins(n: int, straps: dict, lo: float = 0.3, hi: float = 0.7) -> np.ndarray:
+    pinned = np.zeros(n, dtype=bool)
     for grid in straps.values():
         r = len(grid)
         sel = np.arange(r)
@@ -848,9 +853,9 @@ def _build_top(body: TemplateBody, p: TopParams, h: float) -> tuple[_Mesh, np.nd
     mesh = _Mesh()
     xs = 0.5 * (body.neck_halfwidth + body.shoulder_x)
     x_in, x_out = xs - p.strap_width / 2, xs + p.strap_width / 2
-    rings, straps, _ = _strapped_torso(body, mesh, h, z_top, z_bot, x_in, x_out, _BodyRadius(p.looseness),
+    rings, _, _ = _strapped_torso(body, mesh, h, z_top, z_bot, x_in, x_out, _BodyRadius(p.looseness),
                                        p.looseness)
-    return mesh, _strap_pins(mesh.n, straps, neckline=rings[0])
+    return mesh, _band_pins(mesh.n, rings[0])
 
 
 def _build_dress(body: TemplateBody, p: DressParams, h: float) -> tuple[_Mesh, np.ndarray]:
@@ -861,8 +866,8 @@ def _build_dress(body: TemplateBody, p: DressParams, h: float) -> tuple[_Mesh, n
     xs = 0.5 * (body.neck_halfwidth + body.shoulder_x)
     x_in, x_out = xs - p.strap_width / 2, xs + p.strap_width / 2
     radius = _SkirtRadius(body.z_hip, p.looseness, p.flare, body.z_waist)
-    rings, straps, _ = _strapped_torso(body, mesh, h, z_top, z_bot, x_in, x_out, radius, p.looseness)
-    return mesh, _strap_pins(mesh.n, straps, neckline=rings[0])
+    rings, _, _ = _strapped_torso(body, mesh, h, z_top, z_bot, x_in, x_out, radius, p.looseness)
+    return mesh, _band_pins(mesh.n, rings[0])
 
 
 def _build_tshirt(body: TemplateBody, p: TShirtParams, h: float) -> tuple[_Mesh, np.ndarray]:

@@ -138,7 +138,7 @@ def simulate_job(job: JobSpec, config: GenerateConfig) -> SequenceRecord:
     garment = make_garment(job.garment_type, body, job.garment_params, target_vertices=config.target_vertices)
     rest = rest_edge_lengths(garment.vertices, garment.faces)
     template, settle_info = settle(garment, canonical.vertices, body.faces, job.fabric, sim_cfg)
-    ok, reason = check_result(template, garment.faces, rest, canonical.vertices, body.faces)
+    ok, reason = check_result(template, garment.faces, rest, canonical.vertices, body.faces, pinned=garment.pinned)
     if not ok:
         raise SimulationRejected(reason.split(":")[0], "settle: " + reason)
 
@@ -153,7 +153,8 @@ def simulate_job(job: JobSpec, config: GenerateConfig) -> SequenceRecord:
     )
     keep = stored_frame_indices(len(frames), config.motion_frames, config.store_every)
     body_idx = np.minimum(keep, config.motion_frames - 1)  # hold frames keep the target pose
-    ok, reason = check_result(frames[keep], garment.faces, rest, body_frames[body_idx], body.faces)
+    ok, reason = check_result(frames[keep], garment.faces, rest, body_frames[body_idx], body.faces,
+                              pinned=garment.pinned)
     if not ok:
         raise SimulationRejected(reason.split(":")[0], reason)
     if not motion_info["settled"]:

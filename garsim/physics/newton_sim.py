@@ -422,13 +422,15 @@ def check_result(
     body_faces: np.ndarray,
     max_stretch: float = 1.5,
     max_inside: float = 0.01,
+    pinned: np.ndarray | None = None,
 ) -> tuple[bool, str]:
     """Accept or reject simulated frames (T, N, 3): returns (ok, "" or "<reason>: <detail>").
 
     Rejects non-finite values, any edge longer than ``max_stretch`` x its rest length (edges in
     ``unique_edges(garment_faces)`` order), or more than ``max_inside`` of the garment vertices
     inside the body at any frame. ``body_vertices`` is (Vb, 3) for all frames or (T, Vb, 3).
-    The reason is logged.
+    Edges between two ``pinned`` vertices are not simulated (they follow the skinned body, which
+    stretches at the shoulders) and are left out of the stretch test. The reason is logged.
     """
     frames = np.asarray(frames)
     if frames.ndim == 2:
@@ -451,6 +453,9 @@ def check_result(
         return reject(REJECT_NON_FINITE, f"NaN/inf at frame {int(np.argmin(finite))}")
     d = frames[:, edges[:, 1]] - frames[:, edges[:, 0]]
     ratio = np.linalg.norm(d, axis=2) / np.maximum(rest, 1e-12)[None]
+    if pinned is not None:
+        pinned = np.asarray(pinned, dtype=bool)
+        ratio[:, pinned[edges[:, 0]] & pinned[edges[:, 1]]] = 1.0
     worst = float(ratio.max())
     if worst > max_stretch:
         t, e = np.unravel_index(int(np.argmax(ratio)), ratio.shape)
