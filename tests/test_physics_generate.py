@@ -81,6 +81,15 @@ def test_shards_partition_the_jobs(tmp_path, monkeypatch):
     assert sorted(ran) == list(range(10))
 
 
+def test_splits_are_interleaved(tmp_path, monkeypatch):
+    ran = []
+    monkeypatch.setattr(gen, "_run_one", lambda args: ran.append(args[0].split) or
+                        {"ok": False, "entry": {"id": args[0].seq_id, "reason": "x", "detail": "x", "seconds": 0}})
+    gen.generate(GenerateConfig(out=tmp_path, num_train=8, num_test=4, num_generalization=2, workers=1),
+                 progress=False)
+    assert ran[:3] == ["train", "test", "generalization"] and ran.count("test") == 4
+
+
 @pytest.mark.slow
 def test_real_generation_end_to_end(tmp_path):
     cfg = GenerateConfig(out=tmp_path, num_train=1, num_test=0, num_generalization=0, workers=1,
