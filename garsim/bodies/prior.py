@@ -14,8 +14,7 @@ import scipy.sparse as sp
 
 from garsim.bodies.base import BodyModel, PosedBody
 from garsim.geometry.mesh import unique_edges
-from garsim.geometry.proximity import nearest_vertices
-from garsim.geometry.skinning import dense_weights, lbs_prior, transfer_weights
+from garsim.geometry.proximity import cached_nearest, nearest_vertices
 
 DEFAULT_K = 4
 
@@ -72,7 +71,35 @@ def garment_prior(
     """G^prior of ``garment`` (draped on ``canonical``) on ``target``."""
     if body.skin_weights is None or canonical.transforms is None or target.transforms is None:
         return rigfree_prior(garment, canonical.vertices, target.vertices, body.faces, k=k)
-    num_bones = canonical.transforms.shape[0]
-    body_w = dense_weights(body.skin_indices, body.skin_weights, num_bones)
-    w = transfer_weights(garment, canonical.vertices, body_w, k=k)
-    return lbs_prior(garment, w, canonical.transforms, target.transforms)
+    # Same as lbs_prior(garment, transfer_weights(garment, canonical, dense_weights(...), k), ...):
+    # blending is linear in the weights, so each garment vertex's blended matrix is the
+    # inverse-distance blend of its k nearest body vertices' blended matrices, and those need
+    # only the body's sparse skinning (9 bones per vertex) for the body vertices actually used.
+    dist, idx = cached_nearest(garment, canonical.vertices, k=k)  # shared with the model's q query
+    g = np.asarray(garment, dtype=np.float64)
+    if k == 1:
+        a = np.ones((len(g), 1))
+    else:
+        a = 1.0 / np.maximum(dist, 1e-6)
+        a /= a.sum(axis=1, keepdims=True)
+    used, inverse = np.unique(idx, return_inverse=True)
+    si = np.asarray(body.skin_indices)[used]
+    sw = np.asarray(body.skin_weights, dtype=np.float64)[used]
+
+    def blended(transforms: np.ndarray) -> np.ndarray:
+        t = np.asarray(transforms, dtype=np.float64).reshape(-1, 16)
+        per_body = np.einsum("us,usf->uf", sw, t[si])
+        return np.einsum("nk,nkf->nf", a, per_body[inverse.reshape(idx.shape)]).reshape(-1, 4, 4)
+
+    # M_tgt M_can^-1 [g; 1] without a batched 4x4 inverse: bone transforms are affine, so a
+    # blend is [[A, t], [0, s]] (s = weight sum) and M_can^-1 [g; 1] = [A^-1 (g - t/s); 1/s]
+    # with A^-1 b by Cramer's rule (rows r0, r1, r2 of A; det = r0 . (r1 x r2)).
+    m_can, m_tgt = blended(canonical.transforms), blended(target.transforms)
+    s_can = m_can[:, 3, 3]
+    b = g - m_can[:, :3, 3] / s_can[:, None]
+    r0, r1, r2 = m_can[:, 0, :3], m_can[:, 1, :3], m_can[:, 2, :3]
+    c0, c1, c2 = np.cross(r1, r2), np.cross(r2, r0), np.cross(r0, r1)
+    det = np.einsum("ni,ni->n", r0, c0)
+    x = (c0 * b[:, :1] + c1 * b[:, 1:2] + c2 * b[:, 2:3]) / det[:, None]
+    out = np.einsum("nij,nj->ni", m_tgt[:, :3, :3], x) + m_tgt[:, :3, 3] / s_can[:, None]
+    return out.astype(np.float32)

@@ -2,8 +2,56 @@
 
 from __future__ import annotations
 
+from collections import OrderedDict
+
 import numpy as np
 from scipy.spatial import cKDTree
+
+_TREE_CACHE: OrderedDict[tuple, cKDTree] = OrderedDict()
+_TREE_CACHE_SIZE = 8
+
+
+def cached_tree(points: np.ndarray) -> cKDTree:
+    """KD-tree over ``points``, cached by content (shape, dtype, hash of the bytes), so a body reused
+    across garments and frames is indexed once and an edited array never hits a stale tree."""
+    arr = np.ascontiguousarray(points)
+    key = (arr.shape, arr.dtype.str, hash(arr.tobytes()))
+    tree = _TREE_CACHE.get(key)
+    if tree is None:
+        tree = _TREE_CACHE[key] = cKDTree(arr)
+        if len(_TREE_CACHE) > _TREE_CACHE_SIZE:
+            _TREE_CACHE.popitem(last=False)
+    else:
+        _TREE_CACHE.move_to_end(key)
+    return tree
+
+
+_QUERY_CACHE: OrderedDict[tuple, tuple[np.ndarray, np.ndarray]] = OrderedDict()
+_QUERY_CACHE_SIZE = 4
+
+
+def cached_nearest(points: np.ndarray, vertices: np.ndarray, k: int = 1) -> tuple[np.ndarray, np.ndarray]:
+    """(N, k) distances and indices of the k nearest ``vertices`` to each point, single-threaded.
+
+    The tree is cached per vertex set (``cached_tree``) and the last few answers per (points,
+    vertices) content, so the prior's k-nearest query and the model's nearest-vertex query on
+    the same garment and body run the search once (a smaller k is a slice of a larger one).
+    """
+    pts = np.ascontiguousarray(points)
+    verts = np.ascontiguousarray(vertices)
+    key = (pts.shape, pts.dtype.str, hash(pts.tobytes()), verts.shape, verts.dtype.str, hash(verts.tobytes()))
+    hit = _QUERY_CACHE.get(key)
+    if hit is not None and hit[0].shape[1] >= k:
+        _QUERY_CACHE.move_to_end(key)
+        return hit[0][:, :k], hit[1][:, :k]
+    kk = min(k, len(verts))
+    dist, idx = cached_tree(verts).query(pts, k=kk)
+    dist = np.asarray(dist, dtype=np.float64).reshape(len(pts), kk)
+    idx = np.asarray(idx, dtype=np.int64).reshape(len(pts), kk)
+    _QUERY_CACHE[key] = (dist, idx)
+    if len(_QUERY_CACHE) > _QUERY_CACHE_SIZE:
+        _QUERY_CACHE.popitem(last=False)
+    return dist, idx
 
 
 def nearest_vertices(points: np.ndarray, vertices: np.ndarray, k: int = 1) -> tuple[np.ndarray, np.ndarray]:

@@ -27,11 +27,11 @@ from scipy.spatial import cKDTree
 from torch_geometric.data import Batch, Data
 
 from garsim.data.sample import FABRICS, Sample
+from garsim.geometry.proximity import cached_nearest, cached_tree
 from garsim.geometry.mesh import directed_edges, face_pairs, unique_edges, vertex_normals
 from garsim.model.config import GarSimConfig
 
 _CACHE_SIZE = 8
-_TREE_CACHE: OrderedDict[tuple, cKDTree] = OrderedDict()
 _BODY_CACHE: OrderedDict[tuple, "BodyFrame"] = OrderedDict()
 
 
@@ -49,12 +49,6 @@ def _lru_get(cache: OrderedDict, key: tuple, make):
     else:
         cache.move_to_end(key)
     return value
-
-
-def cached_tree(points: np.ndarray) -> cKDTree:
-    """KD-tree over ``points``, cached by content (bodies are reused across garments and frames)."""
-    arr = np.ascontiguousarray(points)
-    return _lru_get(_TREE_CACHE, _content_key(arr), lambda: cKDTree(arr))
 
 
 class BodyFrame:
@@ -240,8 +234,7 @@ def build_graph(
 
     # nearest canonical body vertex q_i (KD-tree of the body, cached per body)
     body = body_frame(body_c, sample.body_faces, cfg.canonicalize_yaw)
-    _, q = body.tree.query(g, k=1)
-    q = np.asarray(q, dtype=np.int64).reshape(n)
+    q = cached_nearest(g, body.vertices, k=1)[1][:, 0]
     r32 = body.rot
 
     # every vector in the body frame: rotate the points once, then subtract
