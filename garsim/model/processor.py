@@ -57,9 +57,10 @@ class MeanAggregator:
         return self._csr
 
     def __call__(self, edge_values: torch.Tensor) -> torch.Tensor:
-        if torch.is_grad_enabled() and edge_values.requires_grad:  # training: plain index_add (cheap backward)
+        if (torch.is_grad_enabled() and edge_values.requires_grad) or edge_values.dtype not in (torch.float32, torch.float64):
+            # training (cheap backward) and reduced precision (no CSR kernel): plain index_add
             out = edge_values.new_zeros(self.num_nodes, edge_values.shape[1]).index_add_(0, self.receivers, edge_values)
-            return out * self.inv_deg[:, None]
+            return out * self.inv_deg.to(out.dtype)[:, None]
         return self.csr() @ edge_values
 
 
@@ -87,21 +88,19 @@ class EdgeUpdate(nn.Module):
         self.rest = nn.Sequential(*mods)
 
     def forward(self, edge: torch.Tensor, node: torch.Tensor, senders: torch.Tensor, receivers: torch.Tensor) -> torch.Tensor:
+        # in-place accumulation into the gathered receiver term: every op here is autograd-safe
+        # (index_select/add_/addmm_ save no tensor that is later overwritten)
         hid = self.lin_recv(node).index_select(0, receivers)
-        hid = hid + self.lin_send(node).index_select(0, senders)
-        hid = torch.addmm(hid, edge, self.lin_edge.weight.t())
-        if torch.is_grad_enabled():
-            hid = _act(self.act_name, hid, inplace=False)
-        else:
-            hid = _act(self.act_name, hid, inplace=True)
-        return self.rest(hid)
+        hid.add_(F.linear(node, self.lin_send.weight).index_select(0, senders))
+        hid.addmm_(edge, self.lin_edge.weight.t())
+        return self.rest(_act(self.act_name, hid, inplace=True))
 
 
 def _act(name: str, x: torch.Tensor, inplace: bool) -> torch.Tensor:
     if name == "relu":
         return F.relu(x, inplace=inplace)
     if name == "silu":
-        return F.silu(x, inplace=inplace)
+        return F.silu(x, inplace=inplace and not x.requires_grad)  # SiLU's backward needs its input
     if name == "gelu":
         return F.gelu(x)
     raise ValueError(f"unknown activation {name!r}")
@@ -119,8 +118,14 @@ class MessagePassingStep(nn.Module):
         self.residual = cfg.residual
 
     def forward(
-        self, node: torch.Tensor, edge: torch.Tensor, edge_index: torch.Tensor, mean: MeanAggregator | None = None
+        self,
+        node: torch.Tensor,
+        edge: torch.Tensor,
+        edge_index: torch.Tensor,
+        mean: MeanAggregator | None = None,
+        own_edge: bool = False,
     ) -> tuple[torch.Tensor, torch.Tensor]:
+        """One step; ``own_edge`` lets inference (no grad) update ``edge`` in place."""
         senders, receivers = edge_index[0], edge_index[1]
         new_edge = self.edge_update(edge, node, senders, receivers)
         if self.mean:
@@ -129,6 +134,8 @@ class MessagePassingStep(nn.Module):
             agg = self.aggregate(new_edge, receivers, dim_size=node.shape[0])
         new_node = self.node_update(torch.cat([agg, node], dim=-1))
         if self.residual:
+            if own_edge and not torch.is_grad_enabled():  # inference: update the edge latents in place
+                return node + new_node, edge.add_(new_edge)
             return node + new_node, edge + new_edge
         return new_node, new_edge
 
@@ -146,5 +153,5 @@ class Processor(nn.Module):
     def forward(self, node: torch.Tensor, edge: torch.Tensor, edge_index: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         mean = MeanAggregator(edge_index[1], node.shape[0]) if (self.mean and self.num_steps > 0) else None
         for l in range(self.num_steps):
-            node, edge = self.steps[l % len(self.steps)](node, edge, edge_index, mean)
+            node, edge = self.steps[l % len(self.steps)](node, edge, edge_index, mean, own_edge=l > 0)
         return node, edge
