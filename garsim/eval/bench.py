@@ -1,0 +1,138 @@
+"""End-to-end inference timing: meshes in memory -> predicted garment vertices, on one CPU thread.
+
+What one timed call does (as ``GarSim`` drapes a garment in practice): the LBS prior
+(``garment_prior``: nearest canonical body vertices, weight blending), the Sample, the graph
+(``build_graph``: q, Eq. 2 inputs, garment kNN, edges) and the forward pass. Per-body work
+(body KD-tree, yaw frame, body-mesh rings) is cached by content and reused across garments,
+as when many garments are draped on one body; it is timed once as ``first_call`` (cold body).
+The cache of nearest-vertex answers is cleared before every timed call, so each call pays
+for its own garment-to-body search (a new garment each time, not a replay).
+
+Wall time on a shared machine includes waiting for other jobs; CPU time (``process_time``)
+of this process is the steadier figure. Compare variants as ratios within one run.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Mapping, Sequence
+from typing import Any
+
+import numpy as np
+import torch
+
+from garsim.bodies.prior import garment_prior
+from garsim.data.sample import Sample
+from garsim.geometry import proximity
+
+DEFAULT_POSE: dict[str, list[float]] = {"upperleg01.L": [-0.5, 0.0, 0.0], "upperleg01.R": [0.3, 0.0, 0.0]}
+"""Target pose used by the benchmark (a step: one thigh forward, one back), on top of Anny's T-pose."""
+
+
+def _timed(fn) -> tuple[Any, float, float]:
+    w0, c0 = time.perf_counter(), time.process_time()
+    out = fn()
+    return out, (time.perf_counter() - w0) * 1000.0, (time.process_time() - c0) * 1000.0
+
+
+def drape_once(model, body, canonical, target, garment_vertices, garment_faces, pinned, fabric: str = "cotton", kind: str = "skirt") -> tuple[np.ndarray, dict[str, float]]:
+    """One end-to-end prediction; returns the vertices and the CPU ms of prior, graph and forward."""
+    from garsim.model.inputs import build_graph
+
+    c0 = time.process_time()
+    prior = garment_prior(body, canonical, target, garment_vertices)
+    c1 = time.process_time()
+    sample = Sample(canonical.vertices, target.vertices, body.faces, garment_vertices, garment_faces, pinned, prior, fabric, kind)
+    graph = build_graph(sample, model.config, loss_inputs=False)
+    c2 = time.process_time()
+    with torch.inference_mode():
+        pred = model(graph).numpy()
+    c3 = time.process_time()
+    return pred, {"prior_cpu_ms": (c1 - c0) * 1e3, "graph_cpu_ms": (c2 - c1) * 1e3, "forward_cpu_ms": (c3 - c2) * 1e3}
+
+
+def bench_inference(
+    model,
+    sizes: Sequence[int] = (600, 2400),
+    repeats: int = 7,
+    *,
+    garment: str = "skirt",
+    body=None,
+    pose: Mapping[str, Sequence[float]] | None = None,
+    fabric: str = "cotton",
+    threads: int = 1,
+) -> dict[int, dict[str, float]]:
+    """Median end-to-end ms (CPU and wall) per garment size on an Anny body, with ``threads`` torch threads.
+
+    ``model`` is a ``GarSimModel``; garments are ``make_garment(garment, body, target_vertices=size)``
+    templates; ``body`` defaults to ``AnnyBody({})``. Returns ``{size: {"vertices", "wall_ms",
+    "cpu_ms", "prior_cpu_ms", "graph_cpu_ms", "forward_cpu_ms", "first_call_wall_ms", "repeats"}}``
+    (medians over ``repeats`` calls after one warm-up; ``first_call_wall_ms`` is the very first
+    call, with the body's caches cold).
+    """
+    from garsim.bodies.anny import AnnyBody
+    from garsim.garments.templates import make_garment
+
+    if repeats < 1:
+        raise ValueError(f"repeats must be >= 1, got {repeats}")
+    if not sizes:
+        raise ValueError("sizes must list at least one garment vertex count, e.g. (600, 2400)")
+    body = body if body is not None else AnnyBody({})
+    canonical = body.canonical()
+    target = body.pose({**body.t_pose(), **{k: np.asarray(v, dtype=np.float64) for k, v in (pose or DEFAULT_POSE).items()}})
+    garments = {int(n): make_garment(garment, body, target_vertices=int(n)) for n in sizes}
+
+    was_training = model.training
+    model.eval()
+    old_threads = torch.get_num_threads()
+    torch.set_num_threads(threads)
+    results: dict[int, dict[str, float]] = {}
+    try:
+        first = True
+        for n, gar in garments.items():
+            args = (model, body, canonical, target, gar.vertices, gar.faces, gar.pinned, fabric, garment)
+            proximity._QUERY_CACHE.clear()
+            if first:  # cold body: KD-tree, yaw frame and rings are built inside this call
+                proximity._TREE_CACHE.clear()
+                from garsim.model import inputs
+
+                inputs._BODY_CACHE.clear()
+            (_, _), first_wall, _ = _timed(lambda: drape_once(*args))
+            first = False
+            wall, cpu, parts = [], [], []
+            for _ in range(repeats):
+                proximity._QUERY_CACHE.clear()  # each call searches its own garment-to-body neighbours
+                (pred, part), w, c = _timed(lambda: drape_once(*args))
+                wall.append(w)
+                cpu.append(c)
+                parts.append(part)
+            if pred.shape != gar.vertices.shape or not np.isfinite(pred).all():
+                raise RuntimeError(f"the model returned {pred.shape} (finite: {np.isfinite(pred).all()}) for a {gar.vertices.shape} garment")
+            results[n] = {
+                "vertices": int(len(gar.vertices)),
+                "wall_ms": float(np.median(wall)),
+                "cpu_ms": float(np.median(cpu)),
+                **{k: float(np.median([p[k] for p in parts])) for k in parts[0]},
+                "first_call_wall_ms": float(first_wall),
+                "repeats": int(repeats),
+            }
+    finally:
+        torch.set_num_threads(old_threads)
+        if was_training:
+            model.train()
+    return results
+
+
+def format_bench(results: Mapping[int, Mapping[str, float]]) -> str:
+    """One line per size: vertices, median CPU / wall ms and the prior / graph / forward split."""
+    lines = []
+    for n, r in results.items():
+        lines.append(
+            f"{n:>6} (actual {r['vertices']} v): cpu {r['cpu_ms']:.1f} ms, wall {r['wall_ms']:.1f} ms "
+            f"[prior {r['prior_cpu_ms']:.1f}, graph {r['graph_cpu_ms']:.1f}, forward {r['forward_cpu_ms']:.1f}; "
+            f"first call {r['first_call_wall_ms']:.0f} ms]"
+        )
+    return "\n".join(lines)
+
+
+__all__ = ["bench_inference", "drape_once", "format_bench", "DEFAULT_POSE"]
