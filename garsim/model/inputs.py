@@ -61,11 +61,14 @@ class BodyFrame:
 
     def __init__(self, body_canonical: np.ndarray, faces: np.ndarray, canonicalize_yaw: bool):
         self.vertices = np.ascontiguousarray(body_canonical, dtype=np.float32)
+        if not np.isfinite(self.vertices).all():
+            raise ValueError("the canonical body has non-finite vertices: fix the body mesh")
         self.faces = np.asarray(faces, dtype=np.int64)
         self.tree = cached_tree(self.vertices)
         rot = body_yaw_frame(self.vertices) if canonicalize_yaw else np.eye(3)
         self.rot = rot.astype(np.float32)
         self.framed = self.vertices @ self.rot.T
+        self.bounds = (self.framed.min(axis=0), self.framed.max(axis=0))
         self._rings: dict[int, np.ndarray] = {}
 
     def ring(self, k: int) -> np.ndarray:
@@ -94,11 +97,17 @@ class BodyFrame:
 
 
 def body_frame(body_canonical: np.ndarray, faces: np.ndarray, canonicalize_yaw: bool = True) -> BodyFrame:
-    """The cached BodyFrame of a canonical body (keyed by its content, so edits are never stale)."""
+    """The cached BodyFrame of a canonical body (keyed by its vertices' content, faces compared), so
+    an edited body is never served stale data."""
     arr = np.ascontiguousarray(body_canonical, dtype=np.float32)
-    f = np.ascontiguousarray(faces, dtype=np.int64)
-    key = _content_key(arr) + _content_key(f) + (bool(canonicalize_yaw),)
-    return _lru_get(_BODY_CACHE, key, lambda: BodyFrame(arr, f, canonicalize_yaw))
+    f = np.asarray(faces, dtype=np.int64)
+    key = _content_key(arr) + (bool(canonicalize_yaw),)
+    hit = _BODY_CACHE.get(key)
+    if hit is not None and (hit.faces is f or (hit.faces.shape == f.shape and np.array_equal(hit.faces, f))):
+        _BODY_CACHE.move_to_end(key)
+        return hit
+    _BODY_CACHE.pop(key, None)
+    return _lru_get(_BODY_CACHE, key, lambda: BodyFrame(arr, f.copy(), canonicalize_yaw))
 
 
 def body_yaw_frame(body_canonical: np.ndarray) -> np.ndarray:
@@ -123,7 +132,10 @@ def body_yaw_frame(body_canonical: np.ndarray) -> np.ndarray:
 
 
 def semantic_vector(
-    body_canonical_frame: np.ndarray, q: np.ndarray, config: GarSimConfig
+    body_canonical_frame: np.ndarray,
+    q: np.ndarray,
+    config: GarSimConfig,
+    bounds: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> np.ndarray:
     """The garment-aware body-semantic input: the binary mask of body vertices in q, (D,) float32.
 
@@ -132,6 +144,7 @@ def semantic_vector(
     fixed grid in body-normalised coordinates (x, y centred on the body's bounding box and
     divided by its height, z from the feet up divided by the height; x in [-.5, .5],
     y in [-.25, .25], z in [0, 1]) and saturates each cell with 1 - exp(-count).
+    ``bounds`` = the body's (min, max) corners, if already known (``BodyFrame.bounds``).
     """
     uq = np.unique(q)
     if config.semantic == "vertex":
@@ -145,7 +158,7 @@ def semantic_vector(
         mask[uq] = 1.0
         return mask
     b = body_canonical_frame
-    lo, hi = b.min(axis=0), b.max(axis=0)
+    lo, hi = bounds if bounds is not None else (b.min(axis=0), b.max(axis=0))
     height = max(float(hi[2] - lo[2]), 1e-6)
     centre = 0.5 * (lo + hi)
     pts = b[uq]
@@ -161,13 +174,11 @@ def semantic_vector(
     g = np.clip(u, 0.0, 1.0) * (dims - 1)
     i0 = np.minimum(np.floor(g).astype(np.int64), dims - 2)
     t = g - i0
-    grid = np.zeros(int(np.prod(dims)), dtype=np.float64)
-    for corner in range(8):
-        off = np.array([(corner >> 0) & 1, (corner >> 1) & 1, (corner >> 2) & 1])
-        w = np.prod(np.where(off == 1, t, 1.0 - t), axis=1)
-        idx = i0 + off
-        flat = (idx[:, 0] * dims[1] + idx[:, 1]) * dims[2] + idx[:, 2]
-        grid += np.bincount(flat, weights=w, minlength=len(grid))
+    off = (np.arange(8)[:, None] >> np.arange(3)[None, :]) & 1  # (8, 3) cell corners
+    w = np.prod(np.where(off[None] == 1, t[:, None, :], 1.0 - t[:, None, :]), axis=2)  # (U, 8)
+    idx = i0[:, None, :] + off[None]
+    flat = (idx[..., 0] * dims[1] + idx[..., 1]) * dims[2] + idx[..., 2]
+    grid = np.bincount(flat.ravel(), weights=w.ravel(), minlength=int(np.prod(dims)))
     return (1.0 - np.exp(-grid)).astype(np.float32)
 
 
@@ -229,7 +240,7 @@ def build_graph(
         raise ValueError(f"garment needs vertices and (F, 3) triangle faces, got {g.shape} and {faces.shape}")
     if faces.min() < 0 or faces.max() >= n:
         raise ValueError(f"garment faces index vertices 0..{faces.max()} but the garment has {n} vertices")
-    if not (np.isfinite(g).all() and np.isfinite(prior).all() and np.isfinite(body_c).all() and np.isfinite(body_t).all()):
+    if not (np.isfinite(g).all() and np.isfinite(prior).all() and np.isfinite(body_t).all()):
         raise ValueError(f"sample {name or ''} has non-finite positions (garment, prior or bodies): fix the data")
 
     # nearest canonical body vertex q_i (KD-tree of the body, cached per body)
@@ -260,7 +271,7 @@ def build_graph(
 
     fab = np.zeros((n, len(FABRICS)), dtype=np.float32)
     fab[:, sample.fabric_index] = 1.0
-    sem = semantic_vector(body.framed, uq, cfg)
+    sem = semantic_vector(body.framed, uq, cfg, bounds=body.bounds)
 
     data = GarmentGraph(
         num_nodes=n,
