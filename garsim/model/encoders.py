@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import torch
+import torch.nn.functional as F
 from torch import nn
 
 from garsim.model.config import GarSimConfig
@@ -50,8 +51,15 @@ class GeometryEncoder(nn.Module):
             activation(cfg.activation),
         )
 
+        self.pool_first = cfg.activation == "relu"  # relu is monotonic: max(relu(x)) = relu(max(x))
+
     def forward(self, rel: torch.Tensor) -> torch.Tensor:
-        return self.mlp(rel * self.scale).amax(dim=1)
+        lin1, act1, lin2, act2 = self.mlp
+        h = act1(F.linear(rel, lin1.weight * self.scale, lin1.bias))  # scale folded into the weights
+        h = lin2(h)
+        if self.pool_first:  # pool before the last activation: k times fewer activations, same result
+            return act2(h.amax(dim=1))
+        return act2(h).amax(dim=1)
 
 
 class BodySemanticEncoder(nn.Module):

@@ -59,14 +59,19 @@ class GarSimModel(nn.Module):
         batch = node_batch(data)
         x_gar = self.geometry(data.gar_rel)
         x_body = self.geometry(data.body_rel).index_select(0, data.q_slot)  # per distinct q -> per vertex
-        s = self.semantic(data.sem)[batch]
+        single = data.rot.shape[0] == 1
+        s = self.semantic(data.sem)
+        s = s.expand(batch.shape[0], -1) if single else s[batch]
         chi = self.garment_encoder(x_gar, data.fabric, data.p, data.p_prior)
         mu = self.body_encoder(x_body, data.delta, s)
         eta = self.node_encoder(chi, mu)
         pi = self.edge_encoder(data.edge_attr)
         eta, _ = self.processor(eta, pi, data.edge_index)
         vec, direction, magnitude = self.decoder(eta)
-        world = torch.einsum("nij,ni->nj", data.rot[batch], vec)  # R^T v: body frame -> world
+        if single:  # R^T v for every row: body frame -> world
+            world = vec @ data.rot[0]
+        else:
+            world = torch.einsum("nij,ni->nj", data.rot[batch], vec)
         base = data.anchor if self.config.head == "position" else data.prior
         pred = base + world
         if return_parts:
