@@ -89,6 +89,29 @@ def cmd_data_verify(args: argparse.Namespace) -> int:
     return 1 if problems else 0
 
 
+def cmd_train(args: argparse.Namespace) -> int:
+    from garsim.model.config import GarSimConfig
+    from garsim.train.data import train_val_samples
+    from garsim.train.trainer import Trainer, TrainConfig
+
+    train, val = train_val_samples(args.data, resolution=args.resolution, val_every=args.val_every)
+    cfg = TrainConfig(
+        out_dir=args.out,
+        epochs=args.epochs,
+        batch_size=args.batch_size,
+        lr=args.lr,
+        seed=args.seed,
+        collision_start_epoch=args.collision_start,
+        progress=not args.quiet,
+        resume=not args.restart,
+    )
+    print(f"training on {len(train)} samples, validating on {len(val)} ({args.resolution} resolution)")
+    history = Trainer(GarSimConfig(), cfg, train, val).fit()
+    if history:
+        print(json.dumps(history[-1], indent=2))
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="garsim", description=__doc__)
     parser.add_argument("-v", "--verbose", action="store_true", help="log at INFO level")
@@ -111,6 +134,22 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--y-up", action="store_true", help="write the output Y-up (Blender/glTF)")
     p.add_argument("--prior-only", action="store_true", help="use the skinning prior, not the model")
     p.set_defaults(func=cmd_drape)
+
+    p = sub.add_parser("train", help="train GarSim on a generated dataset (resumable; torchrun for DDP)")
+    p.add_argument("--data", required=True, help="dataset folder made by `garsim data generate`")
+    p.add_argument("--out", required=True, help="run folder: checkpoints, CSV log, best model")
+    p.add_argument("--epochs", type=int, default=30)
+    p.add_argument("--batch-size", type=int, default=4)
+    p.add_argument("--lr", type=float, default=1e-3)
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--resolution", choices=("low", "full"), default="low",
+                   help="train on the ~4x decimated meshes (the paper's choice) or the full ones")
+    p.add_argument("--val-every", type=int, default=10, help="hold out every N-th training sequence")
+    p.add_argument("--collision-start", type=int, default=None,
+                   help="epoch that switches the collision loss on (default: when validation plateaus)")
+    p.add_argument("--restart", action="store_true", help="ignore an existing checkpoint in --out")
+    p.add_argument("--quiet", action="store_true")
+    p.set_defaults(func=cmd_train)
 
     data = sub.add_parser("data", help="ground-truth datasets").add_subparsers(dest="data_command", required=True)
     p = data.add_parser("generate", help="simulate a dataset with Newton (resumable)")

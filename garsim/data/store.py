@@ -79,7 +79,8 @@ class SequenceRecord:
                 target=lv.targets[k],
                 fabric=self.fabric,
                 garment_type=self.garment_type,
-                meta={**self.meta, "seq_id": self.seq_id, "frame": int(self.frames[k]), "split": self.split},
+                meta={**self.meta, "seq_id": self.seq_id, "frame": int(self.frames[k]), "split": self.split,
+                      "name": f"{self.seq_id}@{int(self.frames[k])}"},
             )
             for k in range(len(self.frames))
         ]
