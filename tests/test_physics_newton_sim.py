@@ -228,10 +228,12 @@ def _assert_ordering(m: dict[str, tuple[float, int, float]], gap_mm: float = 3.0
     assert m["silk"][1] >= m["leather"][1], m  # more hem folds in silk than leather
 
 
-@pytest.mark.slow  # ~65 s on this shared CPU; silk-cotton gap is 0.5 mm on the template skirt (see report)
 def test_fabric_ordering_fast(anny_body):
-    """Low resolution, capped settle: the ordering of drapes must already hold."""
-    _assert_ordering(_fabric_ordering(anny_body, target_vertices=400, max_frames=40))
+    """Low resolution, capped settle: the ordering of drapes must already hold (~30 s).
+
+    Measured (300 v, 30 frames): see the printed table; at 400 v / 40 frames it was 40.7 / 51.2 /
+    58.5 / 72.3 mm, fold angle 20.7 / 12.5 / 8.3 / 5.9 degrees, hem folds 11 / 8 / 4 / 2."""
+    _assert_ordering(_fabric_ordering(anny_body, target_vertices=300, max_frames=30))
 
 
 @pytest.mark.slow
