@@ -193,6 +193,37 @@ def _knn_self(points: np.ndarray, k: int) -> np.ndarray:
     return idx
 
 
+_GARMENT_CACHE: OrderedDict[tuple, tuple[np.ndarray, np.ndarray]] = OrderedDict()
+
+
+def garment_topology(garment: np.ndarray, faces: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray]:
+    """(N, k) garment kNN (self first) and (2, 2E) receiver-sorted directed edges of a template garment.
+
+    Both depend only on the canonical garment, so they are cached by content: draping one garment
+    on a sequence of target poses computes them once.
+    """
+    g = np.ascontiguousarray(garment, dtype=np.float32)
+    f = np.ascontiguousarray(faces, dtype=np.int64)
+    key = _content_key(g) + _content_key(f) + (int(k),)
+
+    def make() -> tuple[np.ndarray, np.ndarray]:
+        ei = directed_edges(f)
+        ei = np.ascontiguousarray(ei[:, np.argsort(ei[1], kind="stable")])  # receiver-sorted (CSR mean)
+        return _knn_self(g, k), ei
+
+    return _lru_get(_GARMENT_CACHE, key, make)
+
+
+def clear_caches() -> None:
+    """Forget every cached body frame, garment topology, KD-tree and nearest-vertex answer."""
+    from garsim.geometry import proximity
+
+    _BODY_CACHE.clear()
+    _GARMENT_CACHE.clear()
+    proximity._TREE_CACHE.clear()
+    proximity._QUERY_CACHE.clear()
+
+
 class GarmentGraph(Data):
     """A garment graph; knows how to offset its index attributes when batched."""
 
@@ -261,11 +292,9 @@ def build_graph(
     uq, q_slot = np.unique(q, return_inverse=True)
     nbr = body.ring(cfg.knn_body)[uq]
     body_rel = body.framed[nbr] - body.framed[uq][:, None, :]
-    gidx = _knn_self(g, cfg.knn_garment)
+    gidx, ei = garment_topology(g, faces, cfg.knn_garment)
     gar_rel = gf[gidx] - gf[:, None, :]
 
-    ei = directed_edges(faces)
-    ei = ei[:, np.argsort(ei[1], kind="stable")]  # receiver-sorted: aggregation is a CSR product
     snd, rcv = ei[0], ei[1]
     edge_attr = np.concatenate([gf[rcv] - gf[snd], pf[rcv] - pf[snd]], axis=1)
 
@@ -286,7 +315,7 @@ def build_graph(
         gar_rel=torch.from_numpy(gar_rel),
         body_rel=torch.from_numpy(body_rel),
         q_slot=torch.from_numpy(q_slot.reshape(n).astype(np.int64)),
-        edge_index=torch.from_numpy(np.ascontiguousarray(ei)),
+        edge_index=torch.from_numpy(ei.copy()),  # the cached array stays private
         edge_attr=torch.from_numpy(edge_attr),
         faces=torch.from_numpy(faces.copy()),
         sem=torch.from_numpy(sem)[None],
