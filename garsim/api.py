@@ -7,7 +7,9 @@ from typing import Any
 
 import numpy as np
 
+from garsim.bodies.anny import match_anny_rig
 from garsim.bodies.prior import rigfree_prior
+from garsim.bodies.recover import recovered_lbs_prior
 from garsim.data.sample import FABRICS, Sample
 from garsim.geometry.io import MeshError, as_mesh
 
@@ -30,6 +32,16 @@ def _pinned_mask(pinned: Any, n: int) -> np.ndarray:
     return mask
 
 
+def mesh_pair_prior(garment: np.ndarray, canonical: np.ndarray, target: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """The garment prior from two body meshes: Anny-topology bodies get the LBS prior with bone
+    transforms recovered from the meshes (as in training); any other topology the rig-free prior."""
+    rig = match_anny_rig(len(canonical), faces)
+    if rig is None:
+        return rigfree_prior(garment, canonical, target, faces)
+    indices, weights, num_bones = rig
+    return recovered_lbs_prior(garment, canonical, target, indices, weights, num_bones)
+
+
 def make_sample(
     body_canonical: Any,
     body_target: Any,
@@ -49,7 +61,7 @@ def make_sample(
             f"canonical body ({len(bc)} vertices, {len(bf)} faces) and target body ({len(bt)} vertices, "
             f"{len(bf_t)} faces) must share one topology: pose the same body mesh"
         )
-    prior = rigfree_prior(g, bc, bt, bf)
+    prior = mesh_pair_prior(g, bc, bt, bf)
     return Sample(
         body_canonical=bc,
         body_target=bt,

@@ -1,0 +1,55 @@
+import numpy as np
+import pytest
+import trimesh
+
+from garsim import GarSim, MeshError
+from garsim.api import make_sample, mesh_pair_prior
+from garsim.bodies.poses import PoseSampler
+from garsim.bodies.prior import garment_prior
+from garsim.garments.templates import make_garment
+
+
+@pytest.fixture(scope="module")
+def scene(anny_body):
+    c = anny_body.canonical()
+    t = anny_body.pose(PoseSampler(seed=2).sample(1)[0])
+    g = make_garment("skirt", anny_body, target_vertices=600)
+    return c, t, g
+
+
+def test_prior_only_drape_matches_the_lbs_prior_from_meshes(anny_body, scene):
+    c, t, g = scene
+    out = GarSim.prior_only().drape((c.vertices, anny_body.faces), (t.vertices, anny_body.faces),
+                                    (g.vertices, g.faces), fabric="silk")
+    true = garment_prior(anny_body, c, t, g.vertices)
+    assert out.shape == g.vertices.shape
+    assert np.linalg.norm(out - true, axis=1).mean() < 1e-3
+
+
+def test_trimesh_inputs_and_other_topologies(anny_body, scene):
+    c, t, g = scene
+    sphere = trimesh.creation.icosphere(subdivisions=3)
+    moved = sphere.copy()
+    moved.apply_translation([0.1, 0.2, 0.3])
+    garment = trimesh.Trimesh(np.asarray(sphere.vertices[:100]) * 1.1, [[0, 1, 2]], process=False)
+    out = mesh_pair_prior(np.asarray(garment.vertices), np.asarray(sphere.vertices), np.asarray(moved.vertices),
+                          np.asarray(sphere.faces))
+    np.testing.assert_allclose(out, np.asarray(garment.vertices) + [0.1, 0.2, 0.3], atol=1e-5)
+    res = GarSim.prior_only().drape(sphere, moved, garment)
+    np.testing.assert_allclose(res, out, atol=1e-6)
+
+
+def test_bad_inputs_are_refused_with_clear_errors(anny_body, scene):
+    c, t, g = scene
+    sim = GarSim.prior_only()
+    body_c, body_t = (c.vertices, anny_body.faces), (t.vertices, anny_body.faces)
+    with pytest.raises(ValueError, match="unknown fabric"):
+        sim.drape(body_c, body_t, (g.vertices, g.faces), fabric="wool")
+    with pytest.raises(MeshError, match="share one topology"):
+        sim.drape(body_c, (t.vertices, anny_body.faces[:-10]), (g.vertices, g.faces))
+    bad = g.vertices.copy()
+    bad[3] = np.nan
+    with pytest.raises(MeshError, match="garment"):
+        sim.drape(body_c, body_t, (bad, g.faces))
+    with pytest.raises(ValueError, match="pinned"):
+        make_sample(body_c, body_t, (g.vertices, g.faces), pinned=[len(g.vertices) + 5])
