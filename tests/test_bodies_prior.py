@@ -59,3 +59,14 @@ def test_rigfree_prior_matches_lbs_prior_on_anny(body):
     assert err.mean() < 1e-3 and np.percentile(err, 95) < 3e-3, (err.mean(), np.percentile(err, 95))
     moved = np.linalg.norm(lbs - g, axis=1)
     assert moved.max() > 0.3  # the pose really moves the garment (the leg is raised)
+
+
+def test_sparse_lbs_prior_equals_dense_weight_transfer(body):
+    """garment_prior's fast path (per-body-vertex blending) = lbs_prior with dense transferred weights."""
+    from garsim.geometry.skinning import dense_weights, lbs_prior, transfer_weights
+
+    c, t = body.canonical(), body.pose(POSE)
+    g = shell(body, offset=0.03, step=9)
+    for k in (1, 4):
+        w = transfer_weights(g, c.vertices, dense_weights(body.skin_indices, body.skin_weights, len(c.transforms)), k=k)
+        np.testing.assert_allclose(garment_prior(body, c, t, g, k=k), lbs_prior(g, w, c.transforms, t.transforms), atol=2e-6)

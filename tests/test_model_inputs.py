@@ -99,3 +99,27 @@ def test_bad_input_messages(sample):
     bad[0, 0] = np.nan
     with pytest.raises(ValueError, match="non-finite"):
         build_graph(replace(sample, prior=bad))
+
+
+def test_body_rings_and_caches_follow_content():
+    from garsim.model.inputs import body_frame, garment_topology
+
+    # a square split in two triangles + a pendant triangle: vertex 0 touches 1, 2, 3
+    verts = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0], [2, 0, 0]], dtype=np.float32)
+    faces = np.array([[0, 1, 2], [0, 2, 3], [1, 4, 2]])
+    ring = body_frame(verts, faces, canonicalize_yaw=False).ring(4)
+    assert ring.tolist() == [[0, 1, 2, 3], [1, 0, 2, 4], [2, 0, 1, 3], [3, 0, 2, 3], [4, 1, 2, 4]]
+    # cut to the lowest-index neighbours when the ring is larger than k - 1; padded with self
+    assert body_frame(verts, faces, canonicalize_yaw=False).ring(3)[0].tolist() == [0, 1, 2]
+    # the cache is keyed by content: edited vertices or faces give a new frame, never a stale one
+    moved = verts.copy()
+    moved[4] = [3, 0, 0]
+    assert body_frame(moved, faces, False) is not body_frame(verts, faces, False)
+    assert body_frame(verts, faces[:2], False).ring(4)[4].tolist() == [4, 4, 4, 4]
+    knn, ei = garment_topology(verts, faces, 2)
+    assert knn[:, 0].tolist() == [0, 1, 2, 3, 4]
+    assert (np.diff(ei[1]) >= 0).all() and ei.shape == (2, 2 * 7)  # receiver-sorted, 7 edges both ways
+    assert knn[4, 1] == 1
+    other = verts.copy()
+    other[4] = [0, 2, 0]  # now nearest to vertex 3: the cached answer must not be reused
+    assert garment_topology(other, faces, 2)[0][4, 1] == 3
