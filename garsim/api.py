@@ -96,15 +96,21 @@ class GarSim:
     @classmethod
     def pretrained(cls) -> "GarSim":
         """The model shipped inside the package (``garsim/weights``)."""
-        path = WEIGHTS_DIR / "garsim.safetensors"
-        if not path.exists():
+        from garsim.model.garsim import WEIGHTS_FILE, GarSimModel
+
+        if not (WEIGHTS_DIR / WEIGHTS_FILE).exists():
             raise FileNotFoundError(
-                f"no pretrained weights at {path}: this build ships no trained model yet; "
+                f"no pretrained weights at {WEIGHTS_DIR / WEIGHTS_FILE}: this build ships no trained model; "
                 "use GarSim.prior_only() (or `garsim drape --prior-only`)"
             )
+        return cls(model=GarSimModel.load(WEIGHTS_DIR))
+
+    @classmethod
+    def load(cls, directory: str | Path) -> "GarSim":
+        """A model saved by training (a folder with model.safetensors + config.json)."""
         from garsim.model.garsim import GarSimModel
 
-        return cls(model=GarSimModel.load(path))
+        return cls(model=GarSimModel.load(directory))
 
     @classmethod
     def default(cls) -> "GarSim":

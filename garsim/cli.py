@@ -112,6 +112,35 @@ def cmd_train(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_eval(args: argparse.Namespace) -> int:
+    from garsim.api import GarSim
+    from garsim.eval.experiments import (
+        evaluate_split,
+        fabric_awareness,
+        format_table,
+        ground_truth_fabric_distances,
+    )
+
+    sim = GarSim.load(args.model) if args.model else GarSim.default()
+    report: dict = {"model": args.model or sim.name, "resolution": args.resolution}
+    for split in args.splits:
+        report[split] = evaluate_split(sim.model, args.data, split, args.resolution)
+        print(f"## {split} split ({args.resolution} resolution)\n{format_table(report[split])}\n")
+    if sim.model is not None:
+        report["fabric_distance_mm"] = {
+            "garsim": fabric_awareness(sim.model, args.data, resolution=args.resolution),
+            "ground_truth": ground_truth_fabric_distances(args.data, resolution=args.resolution),
+        }
+        print("fabric awareness (test skirts, mean garment-to-body distance, mm):",
+              json.dumps(report["fabric_distance_mm"], indent=1))
+    if args.out:
+        from garsim.atomic import atomic_write_bytes
+
+        atomic_write_bytes(args.out, json.dumps(report, indent=1).encode())
+        print(args.out)
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="garsim", description=__doc__)
     parser.add_argument("-v", "--verbose", action="store_true", help="log at INFO level")
@@ -150,6 +179,14 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--restart", action="store_true", help="ignore an existing checkpoint in --out")
     p.add_argument("--quiet", action="store_true")
     p.set_defaults(func=cmd_train)
+
+    p = sub.add_parser("eval", help="the paper's metrics on a dataset split: GarSim vs the LBS prior")
+    p.add_argument("--data", required=True, help="dataset folder")
+    p.add_argument("--model", help="a trained model folder (default: the shipped model)")
+    p.add_argument("--splits", nargs="+", default=["test", "generalization"])
+    p.add_argument("--resolution", choices=("low", "full"), default="low")
+    p.add_argument("--out", help="write the results as JSON here")
+    p.set_defaults(func=cmd_eval)
 
     data = sub.add_parser("data", help="ground-truth datasets").add_subparsers(dest="data_command", required=True)
     p = data.add_parser("generate", help="simulate a dataset with Newton (resumable)")
