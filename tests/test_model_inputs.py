@@ -123,3 +123,15 @@ def test_body_rings_and_caches_follow_content():
     other = verts.copy()
     other[4] = [0, 2, 0]  # now nearest to vertex 3: the cached answer must not be reused
     assert garment_topology(other, faces, 2)[0][4, 1] == 3
+
+
+def test_collision_normals_equal_full_vertex_normals(sample):
+    from garsim.geometry.mesh import vertex_normals
+    from garsim.model.inputs import collision_body
+
+    col = collision_body(sample)
+    full = vertex_normals(sample.body_target, sample.body_faces)
+    d2 = ((col["col_body"].numpy()[:, None, :] - sample.body_target[None, :, :]) ** 2).sum(-1)
+    sel = d2.argmin(axis=1)
+    np.testing.assert_array_equal(col["col_normal"].numpy(), full[sel])  # bitwise: same faces, same order
+    assert len(sel) > 50 and np.allclose(np.linalg.norm(col["col_normal"].numpy(), axis=1), 1.0, atol=1e-5)
