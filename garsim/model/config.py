@@ -16,7 +16,7 @@ class GarSimConfig:
     """Hyperparameters of GarSim; saved next to the weights as JSON.
 
     Inputs: ``knn_garment`` (k nearest garment vertices) / ``knn_body`` (q and its body-mesh
-    1-ring, nearest first, padded with q) neighbourhood sizes of the geometry encoder;
+    1-ring by vertex index, padded with q) neighbourhood sizes of the geometry encoder;
     ``canonicalize_yaw`` expresses every vector in a frame fixed to the canonical body's
     heading (exact equivariance to rotations about the vertical axis); ``semantic`` picks
     the body-semantic input: ``"grid"`` (the binary mask over body vertices splatted onto a
