@@ -104,6 +104,7 @@ def cmd_train(args: argparse.Namespace) -> int:
         collision_start_epoch=args.collision_start,
         progress=not args.quiet,
         resume=not args.restart,
+        threads=args.threads,
     )
     print(f"training on {len(train)} samples, validating on {len(val)} ({args.resolution} resolution)")
     history = Trainer(GarSimConfig(), cfg, train, val).fit()
@@ -177,6 +178,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--collision-start", type=int, default=None,
                    help="epoch that switches the collision loss on (default: when validation plateaus)")
     p.add_argument("--restart", action="store_true", help="ignore an existing checkpoint in --out")
+    p.add_argument("--threads", type=int, default=1, help="torch threads per process")
     p.add_argument("--quiet", action="store_true")
     p.set_defaults(func=cmd_train)
 

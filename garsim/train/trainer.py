@@ -62,6 +62,7 @@ class TrainConfig:
     resume: bool = True
     checkpoint_every: int = 1  # epochs
     max_steps_per_epoch: int | None = None  # for smoke tests
+    threads: int = 1  # torch threads per process: more thrash (~30x slower) when the cores are shared
 
     def to_dict(self) -> dict[str, Any]:
         """Plain JSON dict."""
@@ -142,6 +143,7 @@ class Trainer:
     ):
         self.cfg = train_config
         self.model_config = model_config
+        torch.set_num_threads(max(1, train_config.threads))
         self.rank, self.world = init_distributed()
         seed_everything(train_config.seed)
         self.model = GarSimModel(model_config)
