@@ -46,10 +46,10 @@ class MeanAggregator:
     def csr(self) -> torch.Tensor:
         """(N, E) sparse CSR matrix with 1/deg(receiver) at (receiver, edge)."""
         if self._csr is None:
-            crow = torch.zeros(self.num_nodes + 1, dtype=torch.long)
+            crow = torch.zeros(self.num_nodes + 1, dtype=torch.long, device=self.receivers.device)
             torch.cumsum(self._counts, 0, out=crow[1:])
             e = self.receivers.shape[0]
-            col = self._order if self._order is not None else torch.arange(e)
+            col = self._order if self._order is not None else torch.arange(e, device=self.receivers.device)
             val = self.inv_deg.index_select(0, self.receivers.index_select(0, col))
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore", UserWarning)  # "sparse CSR support is in beta"
@@ -57,8 +57,8 @@ class MeanAggregator:
         return self._csr
 
     def __call__(self, edge_values: torch.Tensor) -> torch.Tensor:
-        if (torch.is_grad_enabled() and edge_values.requires_grad) or edge_values.dtype not in (torch.float32, torch.float64):
-            # training (cheap backward) and reduced precision (no CSR kernel): plain index_add
+        if (torch.is_grad_enabled() and edge_values.requires_grad) or edge_values.dtype != torch.float32 or edge_values.device.type != "cpu":
+            # training (cheap backward), other dtypes/devices: plain index_add
             out = edge_values.new_zeros(self.num_nodes, edge_values.shape[1]).index_add_(0, self.receivers, edge_values)
             return out * self.inv_deg.to(out.dtype)[:, None]
         return self.csr() @ edge_values
