@@ -8,11 +8,14 @@ regenerated bit-for-bit from its seed.
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import multiprocessing as mp
+import os
 import time
 import traceback
 from collections import Counter
+from collections.abc import Iterator
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
@@ -129,8 +132,14 @@ def simulate_job(job: JobSpec, config: GenerateConfig) -> SequenceRecord:
     from garsim.garments.remesh import decimate, transfer_barycentric
     from garsim.garments.templates import make_garment
     from garsim.geometry.skinning import dense_weights, lbs_prior, transfer_weights
-    from garsim.physics.newton_sim import SimConfig, SimulationRejected, check_result, rest_edge_lengths
-    from garsim.physics.newton_sim import settle, simulate_motion
+    from garsim.physics.newton_sim import (
+        SimConfig,
+        SimulationRejected,
+        check_result,
+        rest_edge_lengths,
+        settle,
+        simulate_motion,
+    )
 
     t0 = time.perf_counter()
     sim_cfg = SimConfig(**config.sim)
@@ -244,7 +253,10 @@ def generate(config: GenerateConfig, progress: bool = True) -> dict[str, Any]:
     ctx = mp.get_context("spawn")
     work = [(j, config) for j in pending]
     t0 = time.perf_counter()
-    with ctx.Pool(config.workers, maxtasksperchild=20) if config.workers > 1 else _InlinePool() as pool:
+    pool_cm = (
+        _single_threaded_pool(ctx, config.workers) if config.workers > 1 else _InlinePool()
+    )
+    with pool_cm as pool:
         bar = tqdm(pool.imap_unordered(_run_one, work), total=len(work), disable=not progress, unit="seq")
         for result in bar:
             entry = result["entry"]
@@ -259,6 +271,35 @@ def generate(config: GenerateConfig, progress: bool = True) -> dict[str, Any]:
             bar.set_postfix(stored=summary["stored"], rejected=sum(summary["rejected"].values()))
     summary["wall_seconds"] = time.perf_counter() - t0
     return summary
+
+
+_THREAD_VARS = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")
+
+
+def _one_thread() -> None:
+    """Worker initializer: one torch/BLAS thread per worker (workers share the cores)."""
+    import torch
+
+    torch.set_num_threads(1)
+
+
+@contextlib.contextmanager
+def _single_threaded_pool(ctx: Any, workers: int) -> Iterator[Any]:
+    """A process pool whose workers each use one thread (N workers x N threads thrash N cores).
+
+    The thread variables stay set while the pool lives, so workers it respawns inherit them too.
+    """
+    saved = {k: os.environ.get(k) for k in _THREAD_VARS}
+    os.environ.update({k: "1" for k in _THREAD_VARS})
+    try:
+        with ctx.Pool(workers, initializer=_one_thread, maxtasksperchild=20) as pool:
+            yield pool
+    finally:
+        for k, v in saved.items():
+            if v is None:
+                os.environ.pop(k, None)
+            else:
+                os.environ[k] = v
 
 
 class _InlinePool:
