@@ -142,6 +142,29 @@ def cmd_eval(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_bench(args: argparse.Namespace) -> int:
+    from garsim.api import GarSim
+    from garsim.eval.bench import bench_inference, bench_newton, format_bench
+
+    sim = GarSim.load(args.model) if args.model else GarSim.pretrained()
+    report: dict = {"garsim": bench_inference(sim.model, args.sizes, repeats=args.repeats, garment=args.garment)}
+    print(format_bench(report["garsim"]))
+    paper_s = {600: 0.1, 2400: 1.0}  # the paper's reported inference times (Sec. 5)
+    for n, r in report["garsim"].items():
+        if n in paper_s:
+            print(f"{n} v: {1000 * paper_s[n] / r['wall_ms']:.1f}x faster than the paper's {paper_s[n]} s")
+    if args.newton:
+        report["newton"] = bench_newton(args.sizes, garment=args.garment)
+        for n, r in report["newton"].items():
+            ratio = r["wall_ms"] / report["garsim"][n]["wall_ms"]
+            print(f"{n} v: Newton {r['wall_ms'] / 1000:.1f} s ({r['frames']} frames) = {ratio:.0f}x GarSim's time")
+    if args.out:
+        from garsim.atomic import atomic_write_bytes
+
+        atomic_write_bytes(args.out, json.dumps(report, indent=1).encode())
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="garsim", description=__doc__)
     parser.add_argument("-v", "--verbose", action="store_true", help="log at INFO level")
@@ -189,6 +212,15 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--resolution", choices=("low", "full"), default="low")
     p.add_argument("--out", help="write the results as JSON here")
     p.set_defaults(func=cmd_eval)
+
+    p = sub.add_parser("bench", help="end-to-end inference speed (one thread), optionally against Newton")
+    p.add_argument("--model", help="a trained model folder (default: the shipped model)")
+    p.add_argument("--sizes", type=int, nargs="+", default=[600, 2400], help="garment vertex counts")
+    p.add_argument("--garment", default="skirt")
+    p.add_argument("--repeats", type=int, default=9)
+    p.add_argument("--newton", action="store_true", help="also time the Newton simulation of the same drape")
+    p.add_argument("--out", help="write the timings as JSON here")
+    p.set_defaults(func=cmd_bench)
 
     data = sub.add_parser("data", help="ground-truth datasets").add_subparsers(dest="data_command", required=True)
     p = data.add_parser("generate", help="simulate a dataset with Newton (resumable)")

@@ -46,3 +46,11 @@ def test_drape_once_matches_predict(anny_body, model):
     s = Sample(can.vertices, tgt.vertices, anny_body.faces, g.vertices, g.faces, g.pinned, prior, "cotton", "skirt")
     np.testing.assert_array_equal(pred, model.predict(s))
     assert set(parts) == {"prior_cpu_ms", "graph_cpu_ms", "forward_cpu_ms"}
+
+
+def test_bench_newton_tiny(anny_body):
+    from garsim.eval.bench import bench_newton
+
+    res = bench_newton((150,), motion_frames=4, body=anny_body)
+    r = res[150]
+    assert r["wall_ms"] > 0 and r["cpu_ms"] > 0 and r["frames"] >= 4

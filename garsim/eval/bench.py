@@ -137,6 +137,46 @@ def bench_inference(
     return results
 
 
+def bench_newton(
+    sizes: Sequence[int] = (600, 2400),
+    *,
+    garment: str = "skirt",
+    fabric: str = "cotton",
+    motion_frames: int = 24,
+    body=None,
+    pose: Mapping[str, Sequence[float]] | None = None,
+) -> dict[int, dict[str, float]]:
+    """Seconds the Newton VBD simulation takes for what one GarSim call predicts: the settled
+    template moved from the canonical to the same target pose as :func:`bench_inference`
+    (``motion_frames`` frames, then held until it settles). The settle on the canonical body,
+    which the model takes as input, is not timed.
+    """
+    from garsim.bodies.anny import AnnyBody
+    from garsim.bodies.poses import pose_sequence
+    from garsim.garments.templates import make_garment
+    from garsim.geometry.skinning import dense_weights, lbs_prior, transfer_weights
+    from garsim.physics.newton_sim import SimConfig, settle, simulate_motion
+
+    body = body if body is not None else AnnyBody({})
+    canonical = body.canonical()
+    pose = {k: np.asarray(v, dtype=np.float64) for k, v in (pose or DEFAULT_POSE).items()}
+    frames, transforms = pose_sequence(body, {**body.t_pose(), **pose}, motion_frames)
+    body_w = dense_weights(body.skin_indices, body.skin_weights, len(body.bone_labels))
+    results: dict[int, dict[str, float]] = {}
+    for n in sizes:
+        g = make_garment(garment, body, target_vertices=int(n))
+        template, _ = settle(g, canonical.vertices, body.faces, fabric, SimConfig(max_settle_frames=30))
+        pins = np.flatnonzero(g.pinned)
+        w = transfer_weights(template[pins], canonical.vertices, body_w, k=4)
+        pin_targets = np.stack([lbs_prior(template[pins], w, canonical.transforms, t) for t in transforms])
+        (out, info), wall, cpu = _timed(
+            lambda: simulate_motion(template, g.faces, g.pinned, frames, body.faces, pin_targets, fabric)
+        )
+        results[int(n)] = {"vertices": int(len(g.vertices)), "wall_ms": wall, "cpu_ms": cpu,
+                           "frames": int(len(out)), "settled": bool(info["settled"])}
+    return results
+
+
 def format_bench(results: Mapping[int, Mapping[str, float]]) -> str:
     """One line per size: vertices, median CPU / wall ms and the prior / graph / forward split."""
     lines = []
@@ -149,4 +189,4 @@ def format_bench(results: Mapping[int, Mapping[str, float]]) -> str:
     return "\n".join(lines)
 
 
-__all__ = ["bench_inference", "drape_once", "format_bench", "DEFAULT_POSE"]
+__all__ = ["bench_inference", "bench_newton", "drape_once", "format_bench", "DEFAULT_POSE"]
