@@ -51,6 +51,6 @@ def test_drape_once_matches_predict(anny_body, model):
 def test_bench_newton_tiny(anny_body):
     from garsim.eval.bench import bench_newton
 
-    res = bench_newton((150,), motion_frames=4, body=anny_body)
-    r = res[150]
+    res = bench_newton((200,), motion_frames=4, body=anny_body)
+    r = res[200]
     assert r["wall_ms"] > 0 and r["cpu_ms"] > 0 and r["frames"] >= 4
