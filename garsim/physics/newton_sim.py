@@ -219,6 +219,15 @@ class _ClothScene:
             self.state_0.particle_qd.assign(qd)
 
 
+def _abort_reason(cur: np.ndarray, edges: np.ndarray, rest: np.ndarray, config: SimConfig) -> str | None:
+    """Why a running simulation must stop now (non-finite or exploding), or None."""
+    if not np.isfinite(cur).all():
+        return REJECT_NON_FINITE
+    if _edge_stretch(cur, edges, rest) > config.abort_stretch:
+        return REJECT_OVERSTRETCHED
+    return None
+
+
 def _edge_stretch(vertices: np.ndarray, edges: np.ndarray, rest: np.ndarray) -> float:
     length = np.linalg.norm(vertices[edges[:, 1]] - vertices[edges[:, 0]], axis=1)
     return float(np.max(length / np.maximum(rest, 1e-12)))
@@ -239,11 +248,8 @@ def _settle_loop(
             scene.substep()
         cur = scene.positions()
         frames.append(cur)
-        if not np.isfinite(cur).all():
-            aborted = REJECT_NON_FINITE
-            break
-        if _edge_stretch(cur, edges, rest) > config.abort_stretch:
-            aborted = REJECT_OVERSTRETCHED
+        aborted = _abort_reason(cur, edges, rest, config)
+        if aborted:
             break
         speed = float(np.linalg.norm(cur[scene.free] - prev[scene.free], axis=1).mean() / config.frame_dt)
         speeds.append(speed)
@@ -347,11 +353,8 @@ def simulate_motion(
             scene.substep()
         cur = scene.positions()
         frames.append(cur)
-        if not np.isfinite(cur).all():
-            aborted = REJECT_NON_FINITE
-            break
-        if _edge_stretch(cur, edges, rest) > config.abort_stretch:
-            aborted = REJECT_OVERSTRETCHED
+        aborted = _abort_reason(cur, edges, rest, config)
+        if aborted:
             break
     t2 = time.perf_counter()
     hold_info: dict[str, Any] = {"frames": 0, "final_speed": float("nan"), "settled": False, "aborted": aborted}
