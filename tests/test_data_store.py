@@ -87,3 +87,17 @@ def test_verify_detects_truncated_and_corrupt(tmp_path):
 
 def test_verify_on_non_dataset(tmp_path):
     assert "not a garsim dataset" in DatasetStore(tmp_path).verify()[0]
+
+
+def test_export_subset(tmp_path):
+    src = DatasetStore(tmp_path / "src")
+    for i in range(3):
+        src.append_manifest(src.write_sequence(make_record(f"s{i}", seed=i, k=4)))
+    sub = src.export_subset(tmp_path / "sub", ["s2", "s0"], frames=2, resolutions=("low",))
+    recs = list(sub.sequences())
+    assert [r.seq_id for r in recs] == ["s2", "s0"] and set(recs[0].levels) == {"low"}
+    full = next(r for r in src.sequences() if r.seq_id == "s2")
+    np.testing.assert_array_equal(recs[0].levels["low"].targets, full.levels["low"].targets[-2:])
+    assert recs[0].frames.tolist() == full.frames[-2:].tolist() and sub.verify() == []
+    with pytest.raises(StoreError, match="no sequences"):
+        src.export_subset(tmp_path / "x", ["nope"])

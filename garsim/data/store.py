@@ -213,6 +213,31 @@ class DatasetStore:
             raise ValueError(f"resolution must be one of {RESOLUTIONS}, got {resolution!r}")
         return [s for rec in self.sequences(split) for s in rec.samples(resolution)]
 
+    def export_subset(
+        self, dst: str | os.PathLike, ids: list[str], frames: int | None = None, resolutions: tuple[str, ...] = RESOLUTIONS
+    ) -> "DatasetStore":
+        """Copy sequences ``ids`` into a new store, keeping the last ``frames`` frames and the given resolutions
+        (e.g. a small committed test fixture)."""
+        out = DatasetStore(dst)
+        done = out.done_ids()
+        by_id = {e["id"]: e for e in self.entries()}
+        missing = [i for i in ids if i not in by_id]
+        if missing:
+            raise StoreError(f"{self.root}: no sequences {missing}")
+        for seq_id in ids:
+            if seq_id in done:
+                continue
+            rec = self.read_sequence(by_id[seq_id])
+            keep = slice(-frames, None) if frames else slice(None)
+            rec.body_targets, rec.frames = rec.body_targets[keep], rec.frames[keep]
+            rec.levels = {
+                r: GarmentLevel(lv.template, lv.faces, lv.pinned, lv.priors[keep], lv.targets[keep])
+                for r, lv in rec.levels.items()
+                if r in resolutions
+            }
+            out.append_manifest(out.write_sequence(rec))
+        return out
+
     # -- inspection ----------------------------------------------------------------------
     def info(self) -> dict[str, Any]:
         """Counts of sequences and frames per split / garment type / fabric, and disk size."""
