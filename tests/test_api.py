@@ -53,3 +53,18 @@ def test_bad_inputs_are_refused_with_clear_errors(anny_body, scene):
         sim.drape(body_c, body_t, (bad, g.faces))
     with pytest.raises(ValueError, match="pinned"):
         make_sample(body_c, body_t, (g.vertices, g.faces), pinned=[len(g.vertices) + 5])
+
+
+def test_inference_path_never_imports_the_simulator():
+    import subprocess
+    import sys
+
+    code = (
+        "import sys, numpy as np, trimesh\n"
+        "from garsim import GarSim\n"
+        "s = trimesh.creation.icosphere(subdivisions=2)\n"
+        "GarSim.default().drape(s, s, (np.asarray(s.vertices) * 1.1, s.faces))\n"
+        "bad = [m for m in sys.modules if m.split('.')[0] == 'newton' or m.startswith('garsim.physics')]\n"
+        "assert not bad, bad\n"
+    )
+    subprocess.run([sys.executable, "-c", code], check=True)
