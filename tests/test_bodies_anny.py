@@ -136,3 +136,11 @@ def test_bad_bone_names_and_shapes_are_rejected(anny_body):
         anny_body.pose({"neck01": [0.0, 0.1]})
     with pytest.raises(ValueError, match="batch sizes differ"):
         anny_body.pose_batch({"neck01": np.zeros((2, 3)), "spine01": np.zeros((4, 3))})
+
+
+def test_canonical_kinds(anny_body):
+    a, t = anny_body.canonical("apose"), anny_body.canonical()
+    np.testing.assert_allclose(a.vertices, anny_body.pose(None).vertices)
+    assert not np.allclose(a.vertices, t.vertices)
+    with pytest.raises(ValueError, match="tpose"):
+        anny_body.canonical("xpose")

@@ -113,7 +113,12 @@ class AnnyBody(BodyModel):
     def skin_indices(self) -> np.ndarray:
         return self._indices
 
-    def canonical(self) -> PosedBody:
+    def canonical(self, kind: str = "tpose") -> PosedBody:
+        """The T-pose (garsim's canonical pose, as the paper's) or Anny's rest A-pose (``kind="apose"``)."""
+        if kind == "apose":
+            return self.pose(None)
+        if kind != "tpose":
+            raise ValueError(f"canonical pose kind must be 'tpose' or 'apose', got {kind!r}")
         if self._canonical is None:
             self._canonical = self.pose(self.t_pose())
         return self._canonical
