@@ -11,6 +11,14 @@ HEADS: tuple[str, ...] = ("direction_magnitude", "displacement", "position")
 SEMANTIC_MODES: tuple[str, ...] = ("grid", "vertex")
 
 
+def check_known_keys(cls: type, d: dict[str, Any]) -> None:
+    """Refuse keys that are not fields of the dataclass ``cls`` (a config saved by another version)."""
+    known = {f.name for f in fields(cls)}
+    unknown = set(d) - known
+    if unknown:
+        raise ValueError(f"unknown {cls.__name__} keys {sorted(unknown)}; known keys: {sorted(known)}")
+
+
 @dataclass
 class GarSimConfig:
     """Hyperparameters of GarSim; saved next to the weights as JSON.
@@ -86,10 +94,7 @@ class GarSimConfig:
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> "GarSimConfig":
         """Inverse of ``to_dict``; unknown keys are an error."""
-        known = {f.name for f in fields(cls)}
-        unknown = set(d) - known
-        if unknown:
-            raise ValueError(f"unknown GarSimConfig keys {sorted(unknown)}; known keys: {sorted(known)}")
+        check_known_keys(cls, d)
         return cls(**d)
 
     def to_json(self, path: str | Path | None = None) -> str:

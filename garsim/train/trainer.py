@@ -16,7 +16,7 @@ import os
 import random
 import time
 from collections.abc import Iterable, Sequence
-from dataclasses import asdict, dataclass, field, fields
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -28,7 +28,7 @@ from torch.utils.data import DataLoader, Dataset
 from torch.utils.data.distributed import DistributedSampler
 
 from garsim.data.sample import Sample
-from garsim.model.config import GarSimConfig
+from garsim.model.config import GarSimConfig, check_known_keys
 from garsim.atomic import atomic_write
 from garsim.model.garsim import GarSimModel
 from garsim.model.inputs import GarmentGraph, build_graph, collate
@@ -71,10 +71,7 @@ class TrainConfig:
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> "TrainConfig":
         """Inverse of ``to_dict``; unknown keys are an error."""
-        known = {f.name for f in fields(cls)}
-        unknown = set(d) - known
-        if unknown:
-            raise ValueError(f"unknown TrainConfig keys {sorted(unknown)}; known keys: {sorted(known)}")
+        check_known_keys(cls, d)
         d = dict(d)
         if isinstance(d.get("losses"), dict):
             d["losses"] = LossWeights(**d["losses"])
