@@ -12,6 +12,8 @@ from garsim.bodies.prior import rigfree_prior
 from garsim.bodies.recover import recovered_lbs_prior
 from garsim.data.sample import FABRICS, Sample
 from garsim.geometry.io import MeshError, as_mesh
+from garsim.geometry.mesh import vertex_normals
+from garsim.geometry.proximity import push_outside
 
 WEIGHTS_DIR = Path(__file__).parent / "weights"
 
@@ -82,8 +84,23 @@ class GarSim:
     baseline every learned model must beat.
     """
 
-    def __init__(self, model: Any = None) -> None:
+    def __init__(self, model: Any = None, collision_margin: float | None = 0.002) -> None:
+        """``collision_margin`` (metres): predicted vertices inside the target body, or nearer than
+        this, are pushed out along the nearest body normal (None keeps the raw network output)."""
+        if collision_margin is not None and not (0.0 <= collision_margin < 0.05):
+            raise ValueError(f"collision_margin is in metres, in [0, 0.05), got {collision_margin}")
         self.model = model
+        self.collision_margin = collision_margin
+
+    def predict(self, sample: Sample) -> np.ndarray:
+        """The model's garment for a prepared sample (the prior when there is no model)."""
+        if self.model is None:
+            return sample.prior
+        pred = self.model.predict(sample)
+        if self.collision_margin is None:
+            return pred
+        normals = vertex_normals(sample.body_target, sample.body_faces)
+        return push_outside(pred, sample.body_target, normals, self.collision_margin)
 
     @property
     def name(self) -> str:
@@ -125,14 +142,12 @@ class GarSim:
         from garsim.bodies.prior import garment_prior
 
         prior = garment_prior(body, canonical, target, garment.vertices)
-        if self.model is None:
-            return prior
         sample = Sample(
             body_canonical=canonical.vertices, body_target=target.vertices, body_faces=body.faces,
             garment=garment.vertices, garment_faces=garment.faces, pinned=garment.pinned, prior=prior,
             fabric=fabric, garment_type=garment.kind,
         )
-        return self.model.predict(sample)
+        return self.predict(sample)
 
     def drape(
         self,
@@ -147,7 +162,4 @@ class GarSim:
         Each mesh is a ``trimesh.Trimesh``, a ``(vertices, faces)`` pair of arrays or a file path;
         both bodies share one topology; ``garment`` is draped on ``body_canonical``.
         """
-        sample = make_sample(body_canonical, body_target, garment, fabric, pinned)
-        if self.model is None:
-            return sample.prior
-        return self.model.predict(sample)
+        return self.predict(make_sample(body_canonical, body_target, garment, fabric, pinned))

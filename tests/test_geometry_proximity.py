@@ -47,3 +47,17 @@ def test_signed_offset_sphere(icosphere):
     inside = signed_offset_to_nearest(dirs * 0.95, v, normals)
     np.testing.assert_allclose(outside, 0.05, atol=1e-5)  # the nearest vertex is the one the point was pushed from
     np.testing.assert_allclose(inside, -0.05, atol=1e-5)
+
+
+def test_push_outside_moves_only_inside_points_to_the_margin():
+    import trimesh
+
+    from garsim.geometry.mesh import vertex_normals
+    from garsim.geometry.proximity import push_outside, signed_offset_to_nearest
+
+    s = trimesh.creation.icosphere(subdivisions=3)
+    v, n = np.asarray(s.vertices), vertex_normals(np.asarray(s.vertices), s.faces)
+    pts = np.concatenate([v[:20] * 0.95, v[20:40] * 1.05])
+    out = push_outside(pts, v, n, margin=0.002)
+    np.testing.assert_allclose(out[20:], pts[20:])  # outside points untouched
+    np.testing.assert_allclose(signed_offset_to_nearest(out[:20], v, n), 0.002, atol=1e-9)
