@@ -1,7 +1,7 @@
 """Write the result figures of a trained model into docs/: training curve, fabric awareness,
 error maps of test samples (model vs prior).
 
-Run: .venv/bin/python examples/make_report.py --run ~/garsim-runs/v1 --data ~/garsim-data/v1 --results docs/results.json
+Run: .venv/bin/python examples/make_report.py --run ~/garsim-runs/v1 --data ~/garsim-data/v1 --results docs/results_low.json
 """
 
 from __future__ import annotations
@@ -20,7 +20,8 @@ from garsim.geometry.render import render_grid
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__)
-    parser.add_argument("--run", required=True, help="training run folder (log.csv, best/)")
+    parser.add_argument("--run", required=True, help="training run folder (log.csv)")
+    parser.add_argument("--model", default=None, help="model folder (default: the shipped model)")
     parser.add_argument("--data", required=True)
     parser.add_argument("--results", required=True, help="JSON written by `garsim eval --out`")
     parser.add_argument("--docs", default="docs")
@@ -34,13 +35,13 @@ def main() -> None:
         values = {f: {s: fab[s][f] for s in fab if f in fab[s]} for f in fab["garsim"]}
         print(plot_bars(values, "mean garment-to-body distance (mm)",
                         "Fabric awareness: the same test skirts predicted in each fabric", docs / "fabric_awareness.png"))
-    sim = GarSim.load(Path(args.run) / "best")
+    sim = GarSim.load(args.model) if args.model else GarSim.pretrained()
     store = DatasetStore(args.data)
     recs = [r for r in store.sequences("test")][: args.samples]
     panels, titles, colors = [], [], []
     for rec in recs:
         s = rec.samples("low")[-1]
-        pred = sim.model.predict(s)
+        pred = sim.predict(s)
         for name, verts in (("prior", s.prior), ("GarSim", pred), ("ground truth", s.target)):
             err = 1000 * np.linalg.norm(verts - s.target, axis=1)
             panels.append([(s.body_target, s.body_faces), (verts, s.garment_faces)])
