@@ -19,7 +19,7 @@ DEMO_GARMENTS: dict[str, str] = {"skirt": "silk", "top": "cotton", "tshirt": "co
 class DemoConfig:
     out: Path
     seed: int = 0
-    target_vertices: int = 2500
+    target_vertices: int = 800
 
 
 def run_demo(config: DemoConfig) -> list[Path]:
