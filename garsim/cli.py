@@ -22,6 +22,12 @@ def _shard(text: str) -> tuple[int, int]:
     return k, n
 
 
+def _write_json(path: str, obj: object) -> Path:
+    from garsim.atomic import atomic_write_bytes
+
+    return atomic_write_bytes(path, json.dumps(obj, indent=1).encode())
+
+
 def cmd_demo(args: argparse.Namespace) -> int:
     from garsim.demo import DemoConfig, run_demo
 
@@ -135,10 +141,7 @@ def cmd_eval(args: argparse.Namespace) -> int:
         print("fabric awareness (test skirts, mean garment-to-body distance, mm):",
               json.dumps(report["fabric_distance_mm"], indent=1))
     if args.out:
-        from garsim.atomic import atomic_write_bytes
-
-        atomic_write_bytes(args.out, json.dumps(report, indent=1).encode())
-        print(args.out)
+        print(_write_json(args.out, report))
     return 0
 
 
@@ -159,9 +162,7 @@ def cmd_bench(args: argparse.Namespace) -> int:
             ratio = r["wall_ms"] / report["garsim"][n]["wall_ms"]
             print(f"{n} v: Newton {r['wall_ms'] / 1000:.1f} s ({r['frames']} frames) = {ratio:.0f}x GarSim's time")
     if args.out:
-        from garsim.atomic import atomic_write_bytes
-
-        atomic_write_bytes(args.out, json.dumps(report, indent=1).encode())
+        print(_write_json(args.out, report))
     return 0
 
 

@@ -74,7 +74,7 @@ def push_outside(
     vertex normal to ``margin`` in front of it; other points are unchanged. A post-process for
     predicted garments (the same nearest-vertex/normal test as DeePSD's collision count)."""
     p = np.array(points, dtype=np.float64)
-    idx, _ = nearest_vertices(p, body_vertices)
+    _, idx = cached_tree(body_vertices).query(p)  # one tree per body: many garments on one pose reuse it
     n = np.asarray(body_normals, dtype=np.float64)[idx]
     offset = np.einsum("ij,ij->i", p - np.asarray(body_vertices, dtype=np.float64)[idx], n)
     fix = offset < margin
