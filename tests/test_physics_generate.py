@@ -28,6 +28,18 @@ def test_plan_is_deterministic_and_split_without_leakage(tmp_path):
     assert len({j.seq_id for j in jobs}) == len(jobs)
 
 
+def test_growing_a_split_keeps_every_planned_sequence(tmp_path):
+    base = {j.seq_id: j.__dict__ for j in plan_jobs(GenerateConfig(out=tmp_path, seed=1))}
+    grown = plan_jobs(GenerateConfig(out=tmp_path, seed=1, num_train=320, num_test=60, num_generalization=25))
+    by_id = {j.seq_id: j.__dict__ for j in grown}
+    assert all(by_id[k] == v for k, v in base.items())  # nothing renumbered or reseeded
+    # the layout is a fixed repeating block: 300 train, 50 test, 20 generalization slots per 370 indices
+    assert [j.index for j in grown if j.split == "test"][48:58] == [348, 349, 670, 671, 672, 673, 674, 675, 676, 677]
+    assert [j.index for j in grown if j.split == "train"][299:302] == [299, 370, 371]
+    assert [j.index for j in grown if j.split == "generalization"][19:21] == [369, 720]
+    assert len(by_id) == 320 + 60 + 25
+
+
 def test_stored_frames():
     assert stored_frame_indices(41, 30, 3).tolist() == [3, 6, 9, 12, 15, 18, 21, 24, 27, 40]
     assert stored_frame_indices(30, 30, 10).tolist() == [10, 20, 29]

@@ -86,34 +86,53 @@ class JobSpec:
     pose_seed: int
 
 
+# Job indices are laid out in a fixed repeating block of (split, slots): block b holds train indices
+# 370b..370b+299, test 370b+300..370b+349, generalization 370b+350..370b+369. A split of N sequences
+# takes its first N slots across blocks, so growing one split appends jobs and never renumbers (or
+# reseeds) a sequence of any split: an existing dataset stays valid when it is grown.
+INDEX_BLOCK: tuple[tuple[str, int], ...] = (("train", 300), ("test", 50), ("generalization", 20))
+SPLIT_TYPES: dict[str, tuple[str, ...]] = {
+    "train": TRAIN_TYPES, "test": TRAIN_TYPES, "generalization": GENERALIZATION_TYPES,
+}
+
+
+def split_indices(split: str, count: int) -> list[int]:
+    """Global job indices of the first ``count`` sequences of ``split`` in the repeating block layout."""
+    block = sum(n for _, n in INDEX_BLOCK)
+    offset = 0
+    for name, slots in INDEX_BLOCK:
+        if name == split:
+            return [(j // slots) * block + offset + j % slots for j in range(count)]
+        offset += slots
+    raise ValueError(f"unknown split {split!r}; expected one of {[n for n, _ in INDEX_BLOCK]}")
+
+
 def plan_jobs(config: GenerateConfig) -> list[JobSpec]:
     """All jobs of the dataset, deterministic in the seed (independent of shard and workers)."""
     from garsim.garments.templates import sample_garment_params
 
-    splits = (
-        [("train", TRAIN_TYPES)] * config.num_train
-        + [("test", TRAIN_TYPES)] * config.num_test
-        + [("generalization", GENERALIZATION_TYPES)] * config.num_generalization
-    )
+    counts = {"train": config.num_train, "test": config.num_test, "generalization": config.num_generalization}
     jobs = []
-    for i, (split, types) in enumerate(splits):
-        rng = np.random.default_rng([config.seed, i])
-        kind = types[i % len(types)]
-        fabric = FABRICS[(i // len(types)) % len(FABRICS)]
-        phenotype = {k: round(float(rng.uniform(lo, hi)), 4) for k, (lo, hi) in PHENOTYPE_RANGES.items()}
-        params = sample_garment_params(kind, rng)
-        jobs.append(
-            JobSpec(
-                seq_id=f"{split}-{i:05d}",
-                index=i,
-                split=split,
-                garment_type=kind,
-                garment_params=params,
-                fabric=fabric,
-                phenotype=phenotype,
-                pose_seed=int(rng.integers(2**31)),
+    for split, count in counts.items():
+        types = SPLIT_TYPES[split]
+        for i in split_indices(split, count):
+            rng = np.random.default_rng([config.seed, i])
+            kind = types[i % len(types)]
+            fabric = FABRICS[(i // len(types)) % len(FABRICS)]
+            phenotype = {k: round(float(rng.uniform(lo, hi)), 4) for k, (lo, hi) in PHENOTYPE_RANGES.items()}
+            params = sample_garment_params(kind, rng)
+            jobs.append(
+                JobSpec(
+                    seq_id=f"{split}-{i:05d}",
+                    index=i,
+                    split=split,
+                    garment_type=kind,
+                    garment_params=params,
+                    fabric=fabric,
+                    phenotype=phenotype,
+                    pose_seed=int(rng.integers(2**31)),
+                )
             )
-        )
     return jobs
 
 
@@ -241,9 +260,9 @@ def generate(config: GenerateConfig, progress: bool = True) -> dict[str, Any]:
     done = store.done_ids()
     pending = [j for j in jobs if j.index % n == k and j.seq_id not in done]
     # interleave the splits so that a partial run (or a stopped one) holds every split in proportion
-    first = {split: min(j.index for j in jobs if j.split == split) for split in {j.split for j in jobs}}
+    rank = {j.seq_id: r for split in SPLIT_TYPES for r, j in enumerate(x for x in jobs if x.split == split)}
     size = Counter(j.split for j in jobs)
-    pending.sort(key=lambda j: ((j.index - first[j.split]) / size[j.split], j.index))
+    pending.sort(key=lambda j: (rank[j.seq_id] / size[j.split], j.index))
     if config.limit is not None:
         pending = pending[: config.limit]
     summary: dict[str, Any] = {"planned": len(jobs), "pending": len(pending), "stored": 0, "rejected": {},
