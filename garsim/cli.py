@@ -100,7 +100,11 @@ def cmd_train(args: argparse.Namespace) -> int:
     from garsim.train.data import train_val_samples
     from garsim.train.trainer import Trainer, TrainConfig
 
+    from garsim.model.garsim import GarSimModel
+    from garsim.train.losses import LossWeights
+
     train, val = train_val_samples(args.data, resolution=args.resolution, val_every=args.val_every)
+    init = GarSimModel.load(args.init) if args.init else None
     cfg = TrainConfig(
         out_dir=args.out,
         epochs=args.epochs,
@@ -108,12 +112,14 @@ def cmd_train(args: argparse.Namespace) -> int:
         lr=args.lr,
         seed=args.seed,
         collision_start_epoch=args.collision_start,
+        losses=LossWeights(col=args.collision_weight),
         progress=not args.quiet,
         resume=not args.restart,
         threads=args.threads,
     )
     print(f"training on {len(train)} samples, validating on {len(val)} ({args.resolution} resolution)")
-    history = Trainer(GarSimConfig(), cfg, train, val).fit()
+    model_config = init.config if init is not None else GarSimConfig()
+    history = Trainer(model_config, cfg, train, val, init=init).fit()
     if history:
         print(json.dumps(history[-1], indent=2))
     return 0
@@ -197,11 +203,13 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--batch-size", type=int, default=4)
     p.add_argument("--lr", type=float, default=1e-3)
     p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--resolution", choices=("low", "full"), default="low",
-                   help="train on the ~4x decimated meshes (the paper's choice) or the full ones")
+    p.add_argument("--resolution", choices=("low", "full", "both"), default="low",
+                   help="train on the ~4x decimated meshes (the paper's choice), the full ones, or both")
     p.add_argument("--val-every", type=int, default=10, help="hold out every N-th training sequence")
     p.add_argument("--collision-start", type=int, default=None,
                    help="epoch that switches the collision loss on (default: when validation plateaus)")
+    p.add_argument("--collision-weight", type=float, default=1.0, help="α_col of Eq. 7 (the paper: 1)")
+    p.add_argument("--init", help="start from this trained model folder's weights (fine-tuning)")
     p.add_argument("--restart", action="store_true", help="ignore an existing checkpoint in --out")
     p.add_argument("--threads", type=int, default=1, help="torch threads per process")
     p.add_argument("--quiet", action="store_true")

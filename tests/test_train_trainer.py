@@ -111,3 +111,14 @@ def test_ddp_two_processes(tmp_path, data):
     assert r0["sum"] == r1["sum"]  # DDP kept the replicas identical
     assert r0["hist"][-1]["val_err_mm"] == r1["hist"][-1]["val_err_mm"]
     assert (out / "checkpoint" / "optimizer.safetensors").exists() and (out / "log.csv").exists()
+
+
+def test_init_starts_from_given_weights(tmp_path, data):
+    tr, va = data
+    trained = Trainer(SMALL, _cfg(tmp_path / "a", epochs=1), tr, va)
+    trained.fit()
+    fresh = Trainer(SMALL, _cfg(tmp_path / "b", epochs=1), tr, va, init=trained.model)
+    for (name, a), b in zip(trained.model.state_dict().items(), fresh.model.state_dict().values()):
+        assert torch.equal(a, b), name
+    with pytest.raises(ValueError, match="another config"):
+        Trainer(GarSimConfig(), _cfg(tmp_path / "c", epochs=1), tr, va, init=trained.model)

@@ -5,7 +5,9 @@ from __future__ import annotations
 import os
 
 from garsim.data.sample import Sample
-from garsim.data.store import DatasetStore
+from garsim.data.store import RESOLUTIONS, DatasetStore
+
+TRAIN_RESOLUTIONS: tuple[str, ...] = (*RESOLUTIONS, "both")
 
 
 def train_val_samples(
@@ -14,8 +16,12 @@ def train_val_samples(
     """The store's ``train`` split, with every ``val_every``-th sequence held out for validation.
 
     Validation holds whole sequences (garment instance, body and pose unseen in training), so no
-    frame of a validation sequence is trained on.
+    frame of a validation sequence is trained on. ``resolution="both"`` takes every frame at the
+    low and at the full resolution (one model for any mesh density).
     """
+    if resolution not in TRAIN_RESOLUTIONS:
+        raise ValueError(f"resolution must be one of {TRAIN_RESOLUTIONS}, got {resolution!r}")
+    levels = RESOLUTIONS if resolution == "both" else (resolution,)
     store = DatasetStore(data_dir)
     entries = [e for e in store.entries() if e["split"] == "train"]
     if not entries:
@@ -26,6 +32,7 @@ def train_val_samples(
     train: list[Sample] = []
     val: list[Sample] = []
     for i, entry in enumerate(entries):
-        samples = store.read_sequence(entry).samples(resolution)
+        rec = store.read_sequence(entry)
+        samples = [s for level in levels for s in rec.samples(level)]
         (val if i % val_every == val_every - 1 else train).extend(samples)
     return train, val

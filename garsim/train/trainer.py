@@ -137,13 +137,20 @@ class Trainer:
         train_config: TrainConfig,
         train_samples: Sequence[Sample] | Iterable[Sample],
         val_samples: Sequence[Sample] | Iterable[Sample] | None = None,
+        init: GarSimModel | None = None,
     ):
+        """``init``: a trained model (same config) whose weights start the run; a checkpoint in
+        ``out_dir`` still takes precedence when resuming."""
         self.cfg = train_config
         self.model_config = model_config
         torch.set_num_threads(max(1, train_config.threads))
         self.rank, self.world = init_distributed()
         seed_everything(train_config.seed)
         self.model = GarSimModel(model_config)
+        if init is not None:
+            if init.config != model_config:
+                raise ValueError("init model has another config than model_config; pass init.config")
+            self.model.load_state_dict(init.state_dict())
         self.train_set = GraphDataset(train_samples, model_config, with_collision=True)
         self.val_set = GraphDataset(val_samples, model_config, with_collision=False) if val_samples is not None else None
         self.net: torch.nn.Module = self.model
