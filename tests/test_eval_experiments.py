@@ -25,7 +25,8 @@ def _store(tmp_path):
 
 def test_evaluate_prior_error_is_the_known_offset(tmp_path):
     res = evaluate_split(None, _store(tmp_path), "test")
-    assert set(res) == {"prior"} and set(res["prior"]) == {"all", "skirt", "top"}
+    assert set(res) == {"prior", "ground truth"} and set(res["prior"]) == {"all", "skirt", "top"}
+    assert res["ground truth"]["all"]["euclidean_mm"] == 0.0
     assert abs(res["prior"]["all"]["euclidean_mm"] - 10.0) < 0.01
     assert res["prior"]["all"]["frames"] == 4 and res["prior"]["all"]["collision_pct"] == 0.0
     assert "| prior | skirt | 2 | 10.00 |" in format_table(res)

@@ -40,18 +40,20 @@ def evaluate_split(
     """Mean metrics per garment type (and 'all') for the model and for the prior baseline.
 
     Returns {method: {garment_type: {metric: value, "frames": n}}} with methods "garsim" (raw network
-    output), "garsim+push" (with the API's collision post-process, when ``collision_margin``) and "prior".
+    output), "garsim+push" (with the API's collision post-process, when ``collision_margin``), "prior",
+    and "ground truth" (the simulation itself: the reference for normal consistency, smoothness and
+    the collision count, which flags some simulated cloth too on a coarse body mesh).
     """
     samples = DatasetStore(data_dir).samples(split, resolution)
     if not samples:
         raise ValueError(f"{data_dir}: no {split!r} samples to evaluate")
     results: dict[str, dict[str, dict[str, float]]] = {}
-    predictions = {"prior": _predict_all(None, samples)}
+    predictions = {"prior": _predict_all(None, samples), "ground truth": [s.target for s in samples]}
     if model is not None:
         predictions["garsim"] = _predict_all(model, samples)
         if collision_margin is not None:
             predictions["garsim+push"] = _pushed(predictions["garsim"], samples, collision_margin)
-    for name in sorted(predictions, key=lambda k: (k == "prior", k)):
+    for name in sorted(predictions, key=lambda k: (k in ("prior", "ground truth"), k)):
         preds = predictions[name]
         rows: dict[str, list[dict[str, float]]] = defaultdict(list)
         for s, p in zip(samples, preds):
