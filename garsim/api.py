@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 from pathlib import Path
 from typing import Any
 
@@ -11,6 +12,8 @@ from garsim.bodies.anny import match_anny_rig
 from garsim.bodies.prior import rigfree_prior
 from garsim.bodies.recover import recovered_lbs_prior
 from garsim.data.sample import FABRICS, Sample
+from garsim.garments.garment import Garment
+from garsim.garments.remesh import barycentric_map, decimate, transfer_barycentric
 from garsim.geometry.io import MeshError, as_mesh
 from garsim.geometry.mesh import vertex_normals
 from garsim.geometry.proximity import push_outside
@@ -84,19 +87,41 @@ class GarSim:
     baseline every learned model must beat.
     """
 
-    def __init__(self, model: Any = None, collision_margin: float | None = 0.002) -> None:
+    def __init__(
+        self, model: Any = None, collision_margin: float | None = 0.002, max_vertices: int | None = 1000
+    ) -> None:
         """``collision_margin`` (metres): predicted vertices inside the target body, or nearer than
-        this, are pushed out along the nearest body normal (None keeps the raw network output)."""
+        this, are pushed out along the nearest body normal (None keeps the raw network output).
+        ``max_vertices``: a denser garment is draped by the network at about this many vertices (the
+        densest meshes it was trained on have ~800) and its correction to the prior is carried back
+        to every vertex barycentrically; None runs the network on the garment as given."""
         if collision_margin is not None and not (0.0 <= collision_margin < 0.05):
             raise ValueError(f"collision_margin is in metres, in [0, 0.05), got {collision_margin}")
+        if max_vertices is not None and max_vertices < 100:
+            raise ValueError(f"max_vertices must be >= 100 (or None), got {max_vertices}")
         self.model = model
         self.collision_margin = collision_margin
+        self.max_vertices = max_vertices
+
+    def _network(self, sample: Sample) -> np.ndarray:
+        """The network's garment, at the garment's own resolution up to ``max_vertices``."""
+        n = len(sample.garment)
+        if self.max_vertices is None or n <= self.max_vertices:
+            return self.model.predict(sample)
+        garment = Garment(sample.garment, sample.garment_faces, sample.pinned, sample.garment_type, {})
+        low, to_low = decimate(garment, ratio=self.max_vertices / n)
+        low_prior = transfer_barycentric(sample.prior, to_low)
+        low_sample = dataclasses.replace(sample, garment=low.vertices, garment_faces=low.faces, pinned=low.pinned,
+                                         prior=low_prior.astype(np.float32), target=None)
+        correction = self.model.predict(low_sample) - low_prior
+        to_full = barycentric_map(sample.garment, low.vertices, low.faces)
+        return (sample.prior + transfer_barycentric(correction, to_full)).astype(np.float32)
 
     def predict(self, sample: Sample) -> np.ndarray:
         """The model's garment for a prepared sample (the prior when there is no model)."""
         if self.model is None:
             return sample.prior
-        pred = self.model.predict(sample)
+        pred = self._network(sample)
         if self.collision_margin is None:
             return pred
         normals = vertex_normals(sample.body_target, sample.body_faces)

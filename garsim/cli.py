@@ -112,7 +112,7 @@ def cmd_train(args: argparse.Namespace) -> int:
         lr=args.lr,
         seed=args.seed,
         collision_start_epoch=args.collision_start,
-        losses=LossWeights(col=args.collision_weight),
+        losses=LossWeights(col=args.collision_weight, eps=args.collision_eps),
         progress=not args.quiet,
         resume=not args.restart,
         threads=args.threads,
@@ -209,6 +209,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--collision-start", type=int, default=None,
                    help="epoch that switches the collision loss on (default: when validation plateaus)")
     p.add_argument("--collision-weight", type=float, default=1.0, help="α_col of Eq. 7 (the paper: 1)")
+    p.add_argument("--collision-eps", type=float, default=0.004, help="ε of Eq. 6 in metres (margin kept off the body)")
     p.add_argument("--init", help="start from this trained model folder's weights (fine-tuning)")
     p.add_argument("--restart", action="store_true", help="ignore an existing checkpoint in --out")
     p.add_argument("--threads", type=int, default=1, help="torch threads per process")

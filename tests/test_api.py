@@ -68,3 +68,35 @@ def test_inference_path_never_imports_the_simulator():
         "assert not bad, bad\n"
     )
     subprocess.run([sys.executable, "-c", code], check=True)
+
+
+class _ShiftModel:
+    """A stand-in network: the prior moved by a constant vector; records the sizes it was given."""
+
+    shift = np.array([0.01, -0.02, 0.03], dtype=np.float32)
+
+    def __init__(self):
+        self.sizes = []
+
+    def predict(self, sample):
+        self.sizes.append(len(sample.garment))
+        return sample.prior + self.shift
+
+
+def test_dense_garments_are_draped_at_max_vertices_and_carried_back(anny_body, scene):
+    c, t, _ = scene
+    dense = make_garment("skirt", anny_body, target_vertices=3000)
+    body_c, body_t = (c.vertices, anny_body.faces), (t.vertices, anny_body.faces)
+    fake = _ShiftModel()
+    sim = GarSim(fake, collision_margin=None, max_vertices=800)
+    out = sim.drape(body_c, body_t, (dense.vertices, dense.faces))
+    assert len(dense.vertices) > 2500 and 600 <= fake.sizes[-1] <= 900  # the network saw ~800 vertices
+    prior = GarSim.prior_only().drape(body_c, body_t, (dense.vertices, dense.faces))
+    np.testing.assert_allclose(out - prior, np.broadcast_to(fake.shift, out.shape), atol=1e-6)  # constant kept
+    small = make_garment("skirt", anny_body, target_vertices=400)
+    sim.drape(body_c, body_t, (small.vertices, small.faces))
+    assert fake.sizes[-1] == len(small.vertices)  # below the limit: the garment as given
+    GarSim(fake, max_vertices=None).drape(body_c, body_t, (dense.vertices, dense.faces))
+    assert fake.sizes[-1] == len(dense.vertices)
+    with pytest.raises(ValueError, match="max_vertices"):
+        GarSim(fake, max_vertices=10)

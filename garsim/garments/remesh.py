@@ -78,6 +78,13 @@ def _closest_point_barycentric(
     return faces[cand[rows, best]].astype(np.int64), bary[rows, best]
 
 
+def barycentric_map(points: np.ndarray, vertices: np.ndarray, faces: np.ndarray) -> BarycentricMap:
+    """Each point as a barycentric combination of its closest triangle of the mesh (vertices, faces)."""
+    tris, bary = _closest_point_barycentric(np.asarray(points, np.float64), np.asarray(vertices, np.float64),
+                                            np.asarray(faces, np.int64))
+    return BarycentricMap(tris, bary)
+
+
 def decimate(garment: Garment, ratio: float = 0.25) -> tuple[Garment, BarycentricMap]:
     """Decimate to ~``ratio`` of the faces keeping border vertices; returns the garment and a full->low map.
 
@@ -100,7 +107,8 @@ def decimate(garment: Garment, ratio: float = 0.25) -> tuple[Garment, Barycentri
     remap = np.full(len(v_low), -1, dtype=np.int64)
     remap[used] = np.arange(len(used))
     v_low, f_low = v_low[used], remap[f_low]
-    tris, bary = _closest_point_barycentric(v_low, v, garment.faces)
+    mapping = barycentric_map(v_low, v, garment.faces)
+    tris, bary = mapping.triangles, mapping.weights
     # snap the low-res vertices onto the full-res surface (quadric placement moves them off it by ~mm),
     # so the low-res garment is exactly the barycentric transfer of the full-res one
     v_low = np.einsum("mk,mkd->md", bary, v[tris])
@@ -110,7 +118,7 @@ def decimate(garment: Garment, ratio: float = 0.25) -> tuple[Garment, Barycentri
     params = dict(garment.params)
     params["decimation_ratio"] = float(ratio)
     low = Garment(v_low.astype(np.float32), f_low.astype(np.int64), pinned, garment.kind, params)
-    return low, BarycentricMap(tris, bary)
+    return low, mapping
 
 
 def transfer_barycentric(values_full: np.ndarray, mapping: BarycentricMap) -> np.ndarray:
