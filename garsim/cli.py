@@ -5,10 +5,12 @@ from __future__ import annotations
 import argparse
 import json
 import logging
+import os
 import sys
 from pathlib import Path
 
 
+from garsim.atomic import atomic_write
 from garsim.data.sample import FABRICS
 
 
@@ -118,6 +120,10 @@ def cmd_train(args: argparse.Namespace) -> int:
         threads=args.threads,
     )
     print(f"training on {len(train)} samples, validating on {len(val)} ({args.resolution} resolution)")
+    if int(os.environ.get("RANK", "0")) == 0:  # record which sequences this run saw (the store may grow later)
+        Path(args.out).mkdir(parents=True, exist_ok=True)
+        ids = {name: sorted({s.meta["seq_id"] for s in part}) for name, part in (("train", train), ("val", val))}
+        atomic_write(Path(args.out) / "sequences.json", lambda p: Path(p).write_text(json.dumps(ids, indent=1)))
     model_config = init.config if init is not None else GarSimConfig()
     history = Trainer(model_config, cfg, train, val, init=init).fit()
     if history:

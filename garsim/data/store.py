@@ -66,6 +66,8 @@ class SequenceRecord:
 
     def samples(self, resolution: str = "low") -> list[Sample]:
         """The K model samples of this sequence at one resolution."""
+        if resolution not in self.levels:
+            raise ValueError(f"sequence {self.seq_id} has no {resolution!r} resolution (it holds {sorted(self.levels)})")
         lv = self.levels[resolution]
         return [
             Sample(
