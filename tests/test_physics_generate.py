@@ -113,3 +113,24 @@ def test_real_generation_end_to_end(tmp_path):
         lv = rec.levels[res]
         assert np.isfinite(lv.targets).all() and lv.targets.shape[0] == len(rec.frames)
     assert len(rec.levels["low"].template) < 0.4 * len(rec.levels["full"].template)
+
+
+def test_simulation_stopped_during_motion_is_rejected_not_crashed(tmp_path, monkeypatch):
+    """A run the simulator stops early (fewer frames than planned) is a rejection with its reason."""
+    from garsim.physics import newton_sim
+    from garsim.physics.newton_sim import SimulationRejected
+
+    monkeypatch.setattr(newton_sim, "settle", lambda garment, *a, **k: (
+        garment.vertices, {"frames": 10, "final_speed": 0.0, "settled": True, "seconds": 0.0}))
+
+    def exploding_motion(template, faces, pinned, body_frames, *a, **k):
+        frames = np.repeat(template[None], 5, axis=0)  # stopped after 4 of 12 motion frames
+        return frames, {"aborted": "overstretched", "settled": False, "final_speed": float("nan")}
+
+    monkeypatch.setattr(newton_sim, "simulate_motion", exploding_motion)
+    cfg = GenerateConfig(out=tmp_path, num_train=1, num_test=0, num_generalization=0, workers=1,
+                         target_vertices=300, motion_frames=12, store_every=4)
+    job = plan_jobs(cfg)[0]
+    with pytest.raises(SimulationRejected, match="stopped at frame 4") as info:
+        gen.simulate_job(job, cfg)
+    assert info.value.reason == "overstretched"

@@ -180,6 +180,9 @@ def simulate_job(job: JobSpec, config: GenerateConfig) -> SequenceRecord:
     frames, motion_info = simulate_motion(
         template, garment.faces, garment.pinned, body_frames, body.faces, pin_targets, job.fabric, sim_cfg
     )
+    if motion_info["aborted"]:  # stopped early (exploding): fewer frames than planned, nothing to store
+        raise SimulationRejected(motion_info["aborted"], f"{motion_info['aborted']}: simulation stopped at frame "
+                                 f"{len(frames) - 1} (an edge beyond {sim_cfg.abort_stretch}x rest, or non-finite)")
     keep = stored_frame_indices(len(frames), config.motion_frames, config.store_every)
     body_idx = np.minimum(keep, config.motion_frames - 1)  # hold frames keep the target pose
     ok, reason = check_result(frames[keep], garment.faces, rest, body_frames[body_idx], body.faces,
