@@ -15,7 +15,7 @@ from garsim.data.sample import FABRICS, Sample
 from garsim.garments.garment import Garment
 from garsim.garments.remesh import barycentric_map, decimate, transfer_barycentric
 from garsim.geometry.io import MeshError, as_mesh
-from garsim.geometry.mesh import vertex_normals
+from garsim.geometry.mesh import cached_vertex_normals
 from garsim.geometry.proximity import push_outside
 
 WEIGHTS_DIR = Path(__file__).parent / "weights"
@@ -124,7 +124,7 @@ class GarSim:
         pred = self._network(sample)
         if self.collision_margin is None:
             return pred
-        normals = vertex_normals(sample.body_target, sample.body_faces)
+        normals = cached_vertex_normals(sample.body_target, sample.body_faces)
         return push_outside(pred, sample.body_target, normals, self.collision_margin)
 
     @property

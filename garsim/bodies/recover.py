@@ -13,10 +13,55 @@ from __future__ import annotations
 
 import numpy as np
 import scipy.sparse as sp
+from scipy.linalg import cho_factor, cho_solve
 
+from garsim.geometry.cache import ContentCache, content_key
 from garsim.geometry.skinning import apply_transforms, blended_transforms, dense_weights, transfer_weights
 
 DEFAULT_K = 4
+
+
+class _RigSystem:
+    """The parts of the least-squares fit that depend only on the canonical mesh and the rig."""
+
+    def __init__(self, canonical: np.ndarray, skin_indices: np.ndarray, skin_weights: np.ndarray,
+                 num_bones: int, damping: float) -> None:
+        c = np.asarray(canonical, dtype=np.float64)
+        si = np.asarray(skin_indices, dtype=np.int64)
+        sw = np.asarray(skin_weights, dtype=np.float64)
+        if len(c) != len(si) or si.shape != sw.shape:
+            raise ValueError(f"canonical {c.shape} and skinning {si.shape}/{sw.shape} must cover the same vertices")
+        v, k = si.shape
+        homo = np.concatenate([c, np.ones((v, 1))], axis=1)
+        rows = np.repeat(np.arange(v), k * 4)
+        cols = (si[:, :, None] * 4 + np.arange(4)).reshape(-1)
+        vals = (sw[:, :, None] * homo[:, None, :]).reshape(-1)
+        self.a_t = sp.csr_matrix((vals, (rows, cols)), shape=(v, 4 * num_bones)).T.tocsr()
+        self.whole = np.linalg.pinv(homo)  # (4, V): the whole body's best affine map is whole @ target
+        self.factor = cho_factor((self.a_t @ self.a_t.T).toarray() + damping * np.eye(4 * num_bones))
+        self.damping = damping
+        self.num_bones = num_bones
+        self.dense = dense_weights(si, sw, num_bones)
+
+    def fit(self, target: np.ndarray) -> np.ndarray:
+        """(J, 4, 4) bone transforms taking the canonical mesh to ``target``."""
+        t = np.asarray(target, dtype=np.float64)
+        # pull every bone weakly towards the whole body's best affine map (exact for a rigid motion)
+        rhs = self.a_t @ t + self.damping * np.tile(self.whole @ t, (self.num_bones, 1))
+        x = cho_solve(self.factor, rhs)
+        out = np.tile(np.eye(4), (self.num_bones, 1, 1))
+        out[:, :3, :] = x.reshape(self.num_bones, 4, 3).transpose(0, 2, 1)
+        return out
+
+
+_SYSTEMS = ContentCache(4)  # per canonical mesh + rig
+_FITS = ContentCache(16)  # per canonical/target pair
+
+
+def _rig_system(canonical: np.ndarray, skin_indices: np.ndarray, skin_weights: np.ndarray, num_bones: int,
+                damping: float) -> _RigSystem:
+    key = (content_key(canonical, skin_indices, skin_weights), num_bones, damping)
+    return _SYSTEMS.get(key, lambda: _RigSystem(canonical, skin_indices, skin_weights, num_bones, damping))
 
 
 def fit_bone_transforms(
@@ -27,28 +72,16 @@ def fit_bone_transforms(
     num_bones: int,
     damping: float = 1e-4,
 ) -> np.ndarray:
-    """(J, 4, 4) affine bone transforms (canonical -> target) fitted to the skinned body vertices."""
-    c = np.asarray(canonical, dtype=np.float64)
-    t = np.asarray(target, dtype=np.float64)
-    si = np.asarray(skin_indices, dtype=np.int64)
-    sw = np.asarray(skin_weights, dtype=np.float64)
-    if c.shape != t.shape or len(c) != len(si) or si.shape != sw.shape:
-        raise ValueError(
-            f"canonical {c.shape}, target {t.shape} and skinning {si.shape}/{sw.shape} must cover the same vertices"
-        )
-    v, k = si.shape
-    homo = np.concatenate([c, np.ones((v, 1))], axis=1)
-    rows = np.repeat(np.arange(v), k * 4)
-    cols = (si[:, :, None] * 4 + np.arange(4)).reshape(-1)
-    vals = (sw[:, :, None] * homo[:, None, :]).reshape(-1)
-    a = sp.csr_matrix((vals, (rows, cols)), shape=(v, 4 * num_bones))
-    # pull every bone weakly towards the whole body's best affine map (exact for a rigid motion)
-    whole = np.linalg.lstsq(homo, t, rcond=None)[0]  # (4, 3)
-    lhs = (a.T @ a).toarray() + damping * np.eye(4 * num_bones)
-    x = np.linalg.solve(lhs, a.T @ t + damping * np.tile(whole, (num_bones, 1)))
-    out = np.tile(np.eye(4), (num_bones, 1, 1))
-    out[:, :3, :] = x.reshape(num_bones, 4, 3).transpose(0, 2, 1)
-    return out
+    """(J, 4, 4) affine bone transforms (canonical -> target) fitted to the skinned body vertices.
+
+    The canonical-side system is factorised once per canonical mesh and rig, and fits are cached per
+    mesh pair, so many garments or many poses on one body pay for it once.
+    """
+    if np.shape(canonical) != np.shape(target):
+        raise ValueError(f"canonical {np.shape(canonical)} and target {np.shape(target)} must cover the same vertices")
+    system = _rig_system(canonical, skin_indices, skin_weights, num_bones, damping)
+    key = (content_key(canonical, target, skin_indices, skin_weights), num_bones, damping)
+    return _FITS.get(key, lambda: system.fit(target))
 
 
 def recovered_lbs_prior(
@@ -62,5 +95,6 @@ def recovered_lbs_prior(
 ) -> np.ndarray:
     """The LBS prior from a canonical/target mesh pair of a rigged topology (no pose parameters)."""
     bones = fit_bone_transforms(canonical, target, skin_indices, skin_weights, num_bones)
-    w = transfer_weights(garment, canonical, dense_weights(skin_indices, skin_weights, num_bones), k=k)
+    dense = _rig_system(canonical, skin_indices, skin_weights, num_bones, 1e-4).dense
+    w = transfer_weights(garment, canonical, dense, k=k)
     return apply_transforms(np.asarray(garment, dtype=np.float64), blended_transforms(w, bones)).astype(np.float32)

@@ -28,6 +28,7 @@ from typing import Any
 import numpy as np
 
 from garsim.atomic import atomic_write_bytes
+from garsim.geometry.cache import ContentCache, content_key
 SUPPORTED_EXTENSIONS: tuple[str, ...] = (".obj", ".ply", ".glb", ".gltf", ".off", ".stl")
 """File types :func:`load_mesh` reads; :func:`save_mesh` writes all but ``.gltf``."""
 
@@ -225,6 +226,25 @@ def save_mesh(
     return atomic_write_bytes(p, data.encode("utf-8") if isinstance(data, str) else data)
 
 
+_VALIDATED = ContentCache(8)
+
+
+def _validated(vertices: Any, faces: Any, name: str) -> tuple[np.ndarray, np.ndarray]:
+    """``validate_mesh`` cached by content (bodies are passed again with every garment); read-only arrays."""
+    try:
+        key = content_key(np.asarray(vertices), np.asarray(faces))
+    except (TypeError, ValueError):  # ragged input: let validate_mesh say what is wrong
+        return validate_mesh(vertices, faces, name=name)
+
+    def check() -> tuple[np.ndarray, np.ndarray]:
+        v, f = validate_mesh(vertices, faces, name=name)
+        v.setflags(write=False)
+        f.setflags(write=False)
+        return v, f
+
+    return _VALIDATED.get(key, check)
+
+
 def as_mesh(obj: Any, name: str | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Validated (vertices, faces) from a path, a (vertices, faces) pair, or any object with ``.vertices``/``.faces``.
 
@@ -243,9 +263,9 @@ def as_mesh(obj: Any, name: str | None = None) -> tuple[np.ndarray, np.ndarray]:
     if isinstance(obj, (tuple, list)):
         if len(obj) != 2:
             raise MeshError(f"{label}: expected a (vertices, faces) pair, got a sequence of length {len(obj)}")
-        return validate_mesh(obj[0], obj[1], name=name or "mesh")
+        return _validated(obj[0], obj[1], name or "mesh")
     if hasattr(obj, "vertices") and hasattr(obj, "faces"):
-        return validate_mesh(obj.vertices, obj.faces, name=label)
+        return _validated(obj.vertices, obj.faces, label)
     raise MeshError(
         f"cannot read a mesh from a {type(obj).__name__}; pass a file path, a (vertices, faces) pair or a trimesh.Trimesh"
     )

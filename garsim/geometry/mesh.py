@@ -5,6 +5,8 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sp
 
+from garsim.geometry.cache import ContentCache, content_key
+
 
 def unique_edges(faces: np.ndarray) -> np.ndarray:
     """(E, 2) undirected edges (i < j), sorted, from (F, 3) triangles."""
@@ -57,6 +59,14 @@ def vertex_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
     fn3 = np.repeat(fn, 3, axis=0)
     vn = np.stack([np.bincount(corners, weights=fn3[:, c], minlength=len(v)) for c in range(3)], axis=1)
     return (vn / np.maximum(np.linalg.norm(vn, axis=1, keepdims=True), 1e-20)).astype(v.dtype)
+
+
+_NORMALS = ContentCache(8)
+
+
+def cached_vertex_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """``vertex_normals`` cached by content (a body reused across garments); treat the result as read-only."""
+    return _NORMALS.get(content_key(vertices, faces), lambda: vertex_normals(vertices, faces))
 
 
 def uniform_laplacian(faces: np.ndarray, num_vertices: int) -> sp.csr_matrix:

@@ -7,23 +7,16 @@ from collections import OrderedDict
 import numpy as np
 from scipy.spatial import cKDTree
 
-_TREE_CACHE: OrderedDict[tuple, cKDTree] = OrderedDict()
-_TREE_CACHE_SIZE = 8
+from garsim.geometry.cache import ContentCache, content_key
+
+_TREE_CACHE = ContentCache(8)
 
 
 def cached_tree(points: np.ndarray) -> cKDTree:
-    """KD-tree over ``points``, cached by content (shape, dtype, hash of the bytes), so a body reused
-    across garments and frames is indexed once and an edited array never hits a stale tree."""
+    """KD-tree over ``points``, cached by content, so a body reused across garments and frames is
+    indexed once and an edited array never hits a stale tree."""
     arr = np.ascontiguousarray(points)
-    key = (arr.shape, arr.dtype.str, hash(arr.tobytes()))
-    tree = _TREE_CACHE.get(key)
-    if tree is None:
-        tree = _TREE_CACHE[key] = cKDTree(arr)
-        if len(_TREE_CACHE) > _TREE_CACHE_SIZE:
-            _TREE_CACHE.popitem(last=False)
-    else:
-        _TREE_CACHE.move_to_end(key)
-    return tree
+    return _TREE_CACHE.get(content_key(arr), lambda: cKDTree(arr))
 
 
 _QUERY_CACHE: OrderedDict[tuple, tuple[np.ndarray, np.ndarray]] = OrderedDict()
@@ -39,7 +32,7 @@ def cached_nearest(points: np.ndarray, vertices: np.ndarray, k: int = 1) -> tupl
     """
     pts = np.ascontiguousarray(points)
     verts = np.ascontiguousarray(vertices)
-    key = (pts.shape, pts.dtype.str, hash(pts.tobytes()), verts.shape, verts.dtype.str, hash(verts.tobytes()))
+    key = content_key(pts, verts)
     hit = _QUERY_CACHE.get(key)
     if hit is not None and hit[0].shape[1] >= k:
         _QUERY_CACHE.move_to_end(key)
@@ -56,7 +49,7 @@ def cached_nearest(points: np.ndarray, vertices: np.ndarray, k: int = 1) -> tupl
 
 def nearest_vertices(points: np.ndarray, vertices: np.ndarray, k: int = 1) -> tuple[np.ndarray, np.ndarray]:
     """Indices and distances of the ``k`` nearest ``vertices`` to each point ((N,) or (N, k))."""
-    tree = cKDTree(np.asarray(vertices, dtype=np.float64))
+    tree = cached_tree(np.asarray(vertices, dtype=np.float64))
     dist, idx = tree.query(np.asarray(points, dtype=np.float64), k=k, workers=-1)
     return idx.astype(np.int64), dist
 

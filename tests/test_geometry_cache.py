@@ -1,0 +1,42 @@
+"""Content-keyed caches: equal content hits, edited content misses, least-recently-used eviction."""
+
+import numpy as np
+import pytest
+import trimesh
+
+from garsim.geometry.cache import ContentCache, content_key
+from garsim.geometry.io import as_mesh
+from garsim.geometry.mesh import cached_vertex_normals, vertex_normals
+
+
+def test_content_key_follows_content_not_identity():
+    a = np.arange(12, dtype=np.float32).reshape(4, 3)
+    assert content_key(a) == content_key(a.copy())
+    b = a.copy()
+    b[2, 1] += 1e-6
+    assert content_key(a) != content_key(b)
+    assert content_key(a) != content_key(a.astype(np.float64))  # dtype is part of the key
+    assert content_key(a) != content_key(a.reshape(3, 4))
+
+
+def test_lru_eviction_and_recompute():
+    calls = []
+    cache = ContentCache(2)
+    for k in ("a", "b", "a", "c", "b"):
+        cache.get(k, lambda k=k: calls.append(k) or k.upper())
+    assert calls == ["a", "b", "c", "b"]  # "a" hit once; "b" was evicted by "c" (least recently used)
+    assert len(cache) == 2
+    with pytest.raises(ValueError):
+        ContentCache(0)
+
+
+def test_edited_body_is_never_served_stale():
+    s = trimesh.creation.icosphere(subdivisions=2)
+    v, f = np.asarray(s.vertices, np.float64), np.asarray(s.faces)
+    n1 = cached_vertex_normals(v, f)
+    moved = v.copy()
+    moved[:, 2] *= 2.0  # an edited body (new array content)
+    np.testing.assert_allclose(cached_vertex_normals(moved, f), vertex_normals(moved, f))
+    assert cached_vertex_normals(v, f) is n1
+    mv, mf = as_mesh((v, f))
+    assert as_mesh((v.copy(), f.copy()))[0] is mv and not mv.flags.writeable  # validated once, read-only
