@@ -23,6 +23,7 @@ from typing import Any
 import numpy as np
 import torch
 
+from garsim.api import GarSim
 from garsim.bodies.prior import garment_prior
 from garsim.data.sample import Sample
 from garsim.geometry import proximity
@@ -74,9 +75,9 @@ def bench_inference(
     ``model`` is a ``GarSimModel``; garments are ``make_garment(garment, body, target_vertices=size)``
     templates; ``body`` defaults to ``AnnyBody({})``. Returns ``{size: {"vertices", "wall_ms",
     "cpu_ms", "prior_cpu_ms", "graph_cpu_ms", "forward_cpu_ms", "pose_seq_cpu_ms", "pose_seq_wall_ms",
-    "first_call_wall_ms", "repeats"}}`` (medians over ``repeats`` calls after one warm-up;
+    "first_call_wall_ms", "api_cpu_ms", "repeats"}}`` (medians over ``repeats`` calls after one warm-up;
     ``first_call_wall_ms`` is the very first call, with the body's caches cold; ``pose_seq_*``
-    the same garment on ``repeats`` different target poses).
+    the same garment on ``repeats`` different target poses; ``api_cpu_ms`` ``GarSim.drape`` on mesh pairs).
     """
     from garsim.bodies.anny import AnnyBody
     from garsim.garments.templates import make_garment
@@ -118,6 +119,16 @@ def bench_inference(
                 _, w, c = _timed(lambda: drape_once(*seq_args))
                 seq_wall.append(w)
                 seq_cpu.append(c)
+            # the public call as a client makes it: mesh pairs in (bone transforms recovered from the
+            # meshes), the max_vertices path for dense garments, the collision push-out; body caches warm
+            sim = GarSim(model)
+            mesh_args = ((canonical.vertices, body.faces), (target.vertices, body.faces), (gar.vertices, gar.faces))
+            sim.drape(*mesh_args, fabric=fabric)
+            api_cpu = []
+            for _ in range(repeats):
+                _clear_garment_caches()
+                _, _, c = _timed(lambda: sim.drape(*mesh_args, fabric=fabric))
+                api_cpu.append(c)
             if pred.shape != gar.vertices.shape or not np.isfinite(pred).all():
                 raise RuntimeError(f"the model returned {pred.shape} (finite: {np.isfinite(pred).all()}) for a {gar.vertices.shape} garment")
             results[n] = {
@@ -128,6 +139,7 @@ def bench_inference(
                 "pose_seq_cpu_ms": float(np.median(seq_cpu)),
                 "pose_seq_wall_ms": float(np.median(seq_wall)),
                 "first_call_wall_ms": float(first_wall),
+                "api_cpu_ms": float(np.median(api_cpu)),
                 "repeats": int(repeats),
             }
     finally:
@@ -184,7 +196,8 @@ def format_bench(results: Mapping[int, Mapping[str, float]]) -> str:
         lines.append(
             f"{n:>6} (actual {r['vertices']} v): cpu {r['cpu_ms']:.1f} ms, wall {r['wall_ms']:.1f} ms "
             f"[prior {r['prior_cpu_ms']:.1f}, graph {r['graph_cpu_ms']:.1f}, forward {r['forward_cpu_ms']:.1f}]; "
-            f"same garment, new pose: cpu {r['pose_seq_cpu_ms']:.1f} ms; first call (cold body) {r['first_call_wall_ms']:.0f} ms"
+            f"same garment, new pose: cpu {r['pose_seq_cpu_ms']:.1f} ms; first call (cold body) {r['first_call_wall_ms']:.0f} ms; "
+            f"GarSim.drape on mesh pairs: cpu {r['api_cpu_ms']:.1f} ms"
         )
     return "\n".join(lines)
 
