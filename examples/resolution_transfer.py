@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import time
 from collections import defaultdict
 from pathlib import Path
 
@@ -27,24 +28,29 @@ def main() -> None:
     parser.add_argument("--data", required=True)
     parser.add_argument("--model", default=None, help="model folder (default: the shipped model)")
     parser.add_argument("--split", default="test")
-    parser.add_argument("--coarse", type=int, default=250, help="max_vertices of the carried-back variant")
+    parser.add_argument("--coarse", type=int, nargs="+", default=[250, 500], help="max_vertices of the carried-back variants")
     parser.add_argument("--out", default=None)
     args = parser.parse_args()
     model = (GarSim.load(args.model) if args.model else GarSim.pretrained()).model
     methods = {
         "network at 800 v": GarSim(model, collision_margin=None, max_vertices=None),
-        f"network at {args.coarse} v, carried back": GarSim(model, collision_margin=None, max_vertices=args.coarse),
+        **{f"network at {c} v, carried back": GarSim(model, collision_margin=None, max_vertices=c) for c in args.coarse},
         "prior": GarSim.prior_only(),
     }
     errors: dict[str, dict[str, list[float]]] = {m: defaultdict(list) for m in methods}
+    cpu: dict[str, list[float]] = defaultdict(list)
     for s in DatasetStore(args.data).samples(args.split, "full"):
         for name, sim in methods.items():
-            e = euclidean_error_mm(sim.predict(s), s.target)
+            t0 = time.process_time()
+            pred = sim.predict(s)
+            cpu[name].append(1000.0 * (time.process_time() - t0))
+            e = euclidean_error_mm(pred, s.target)
             errors[name][s.garment_type].append(e)
             errors[name]["all"].append(e)
-    table = {m: {k: float(np.mean(v)) for k, v in sorted(per.items())} for m, per in errors.items()}
+    table = {m: {**{k: float(np.mean(v)) for k, v in sorted(per.items())}, "cpu_ms": float(np.median(cpu[m]))}
+             for m, per in errors.items()}
     for m, per in table.items():
-        print(f"{m:40s} " + "  ".join(f"{k} {v:.1f} mm" for k, v in per.items()))
+        print(f"{m:40s} " + "  ".join(f"{k} {v:.1f}" + ("" if k == "cpu_ms" else " mm") for k, v in per.items()))
     if args.out:
         atomic_write(Path(args.out), lambda p: Path(p).write_text(json.dumps(table, indent=1)))
 
