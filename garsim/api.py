@@ -13,7 +13,8 @@ from garsim.bodies.prior import rigfree_prior
 from garsim.bodies.recover import recovered_lbs_prior
 from garsim.data.sample import FABRICS, Sample
 from garsim.garments.garment import Garment
-from garsim.garments.remesh import barycentric_map, decimate, transfer_barycentric
+from garsim.garments.remesh import BarycentricMap, barycentric_map, decimate, transfer_barycentric
+from garsim.geometry.cache import ContentCache, content_key
 from garsim.geometry.io import MeshError, as_mesh
 from garsim.geometry.mesh import cached_vertex_normals
 from garsim.geometry.proximity import push_outside
@@ -80,6 +81,16 @@ def make_sample(
     )
 
 
+_COARSE = ContentCache(8)  # per garment: its decimated copy and the maps both ways
+
+
+def _coarse_copy(sample: Sample, max_vertices: int) -> tuple[Garment, BarycentricMap, BarycentricMap]:
+    """The garment decimated to ~``max_vertices``, the full -> coarse map and the coarse -> full map."""
+    garment = Garment(sample.garment, sample.garment_faces, sample.pinned, sample.garment_type, {})
+    low, to_low = decimate(garment, ratio=max_vertices / len(sample.garment))
+    return low, to_low, barycentric_map(sample.garment, low.vertices, low.faces)
+
+
 class GarSim:
     """Drapes a garment from a canonical body onto a target body in one step.
 
@@ -108,13 +119,14 @@ class GarSim:
         n = len(sample.garment)
         if self.max_vertices is None or n <= self.max_vertices:
             return self.model.predict(sample)
-        garment = Garment(sample.garment, sample.garment_faces, sample.pinned, sample.garment_type, {})
-        low, to_low = decimate(garment, ratio=self.max_vertices / n)
+        low, to_low, to_full = _COARSE.get(
+            (content_key(sample.garment, sample.garment_faces, sample.pinned), self.max_vertices),
+            lambda: _coarse_copy(sample, self.max_vertices),
+        )
         low_prior = transfer_barycentric(sample.prior, to_low)
         low_sample = dataclasses.replace(sample, garment=low.vertices, garment_faces=low.faces, pinned=low.pinned,
                                          prior=low_prior.astype(np.float32), target=None)
         correction = self.model.predict(low_sample) - low_prior
-        to_full = barycentric_map(sample.garment, low.vertices, low.faces)
         return (sample.prior + transfer_barycentric(correction, to_full)).astype(np.float32)
 
     def predict(self, sample: Sample) -> np.ndarray:
