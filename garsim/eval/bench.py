@@ -23,6 +23,7 @@ from typing import Any
 import numpy as np
 import torch
 
+from garsim import api
 from garsim.api import GarSim
 from garsim.bodies.prior import garment_prior
 from garsim.data.sample import Sample
@@ -37,6 +38,7 @@ DEFAULT_POSE: dict[str, list[float]] = {"upperleg01.L": [-0.5, 0.0, 0.0], "upper
 def _clear_garment_caches() -> None:
     proximity._QUERY_CACHE.clear()
     inputs._GARMENT_CACHE.clear()
+    api._COARSE.clear()  # the API's decimated copy of a dense garment
 
 
 def _timed(fn) -> tuple[Any, float, float]:
