@@ -20,7 +20,7 @@ from garsim.geometry.render import render_grid
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__)
-    parser.add_argument("--run", required=True, help="training run folder (log.csv)")
+    parser.add_argument("--run", required=True, nargs="+", help="training run folder(s) (log.csv), stages in order")
     parser.add_argument("--model", default=None, help="model folder (default: the shipped model)")
     parser.add_argument("--data", required=True)
     parser.add_argument("--results", required=True, help="JSON written by `garsim eval --out`")
@@ -28,7 +28,7 @@ def main() -> None:
     parser.add_argument("--samples", type=int, default=4)
     args = parser.parse_args()
     docs = Path(args.docs)
-    print(plot_training_curve(Path(args.run) / "log.csv", docs / "training_curve.png"))
+    print(plot_training_curve([Path(r) / "log.csv" for r in args.run], docs / "training_curve.png"))
     results = json.loads(Path(args.results).read_text())
     if "fabric_distance_mm" in results:
         fab = results["fabric_distance_mm"]

@@ -9,6 +9,8 @@ def test_training_curve_png(tmp_path):
                    "1,10,0.001,0.5,30,80,100,0,1\n2,20,0.001,0.2,20,60,100,1,1\n")
     png = plot_training_curve(log, tmp_path / "curve.png")
     assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and png.stat().st_size > 5000
+    stages = plot_training_curve([log, log], tmp_path / "stages.png")  # a fine-tuning stage after the first
+    assert stages.stat().st_size > png.stat().st_size  # the stage drawn on (more points, a stage line)
     (tmp_path / "empty.csv").write_text("epoch,train_loss\n")
     with pytest.raises(ValueError, match="no epochs"):
         plot_training_curve(tmp_path / "empty.csv", tmp_path / "x.png")
