@@ -100,3 +100,19 @@ def test_dense_garments_are_draped_at_max_vertices_and_carried_back(anny_body, s
     assert fake.sizes[-1] == len(dense.vertices)
     with pytest.raises(ValueError, match="max_vertices"):
         GarSim(fake, max_vertices=10)
+
+
+def test_a_garment_the_simplifier_rejects_still_gets_a_prediction(anny_body, scene, monkeypatch):
+    from garsim import api
+
+    c, t, _ = scene
+    dense = make_garment("top", anny_body, target_vertices=1200)
+
+    def broken(*args, **kwargs):
+        raise RuntimeError("simplifier failed")
+
+    monkeypatch.setattr(api, "_coarse_copy", broken)
+    fake = _ShiftModel()
+    out = GarSim(fake, collision_margin=None, max_vertices=400).drape(
+        (c.vertices, anny_body.faces), (t.vertices, anny_body.faces), (dense.vertices, dense.faces))
+    assert fake.sizes[-1] == len(dense.vertices) and out.shape == dense.vertices.shape
