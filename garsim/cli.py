@@ -10,7 +10,7 @@ import sys
 from pathlib import Path
 
 
-from garsim.atomic import atomic_write
+from garsim.atomic import atomic_write_bytes
 from garsim.data.sample import FABRICS
 
 
@@ -24,9 +24,7 @@ def _shard(text: str) -> tuple[int, int]:
     return k, n
 
 
-def _write_json(path: str, obj: object) -> Path:
-    from garsim.atomic import atomic_write_bytes
-
+def _write_json(path: str | Path, obj: object) -> Path:
     return atomic_write_bytes(path, json.dumps(obj, indent=1).encode())
 
 
@@ -99,11 +97,10 @@ def cmd_data_verify(args: argparse.Namespace) -> int:
 
 def cmd_train(args: argparse.Namespace) -> int:
     from garsim.model.config import GarSimConfig
-    from garsim.train.data import train_val_samples
-    from garsim.train.trainer import Trainer, TrainConfig
-
     from garsim.model.garsim import GarSimModel
+    from garsim.train.data import train_val_samples
     from garsim.train.losses import LossWeights
+    from garsim.train.trainer import Trainer, TrainConfig
 
     train, val = train_val_samples(args.data, resolution=args.resolution, val_every=args.val_every)
     init = GarSimModel.load(args.init) if args.init else None
@@ -121,9 +118,8 @@ def cmd_train(args: argparse.Namespace) -> int:
     )
     print(f"training on {len(train)} samples, validating on {len(val)} ({args.resolution} resolution)")
     if int(os.environ.get("RANK", "0")) == 0:  # record which sequences this run saw (the store may grow later)
-        Path(args.out).mkdir(parents=True, exist_ok=True)
         ids = {name: sorted({s.meta["seq_id"] for s in part}) for name, part in (("train", train), ("val", val))}
-        atomic_write(Path(args.out) / "sequences.json", lambda p: Path(p).write_text(json.dumps(ids, indent=1)))
+        _write_json(Path(args.out) / "sequences.json", ids)
     model_config = init.config if init is not None else GarSimConfig()
     history = Trainer(model_config, cfg, train, val, init=init).fit()
     if history:

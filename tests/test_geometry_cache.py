@@ -26,6 +26,9 @@ def test_lru_eviction_and_recompute():
         cache.get(k, lambda k=k: calls.append(k) or k.upper())
     assert calls == ["a", "b", "c", "b"]  # "a" hit once; "b" was evicted by "c" (least recently used)
     assert len(cache) == 2
+    assert cache.peek("a") is None and cache.peek("b") == "B"  # peek marks "b" recently used
+    cache.put("d", "D")  # evicts "c", not the just-peeked "b"
+    assert cache.peek("c") is None and cache.peek("b") == "B" and cache.peek("d") == "D"
     with pytest.raises(ValueError):
         ContentCache(0)
 
@@ -37,6 +40,6 @@ def test_edited_body_is_never_served_stale():
     moved = v.copy()
     moved[:, 2] *= 2.0  # an edited body (new array content)
     np.testing.assert_allclose(cached_vertex_normals(moved, f), vertex_normals(moved, f))
-    assert cached_vertex_normals(v, f) is n1
+    assert cached_vertex_normals(v, f) is n1 and not n1.flags.writeable
     mv, mf = as_mesh((v, f))
     assert as_mesh((v.copy(), f.copy()))[0] is mv and not mv.flags.writeable  # validated once, read-only

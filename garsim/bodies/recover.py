@@ -19,6 +19,7 @@ from garsim.geometry.cache import ContentCache, content_key
 from garsim.geometry.skinning import apply_transforms, blended_transforms, dense_weights, transfer_weights
 
 DEFAULT_K = 4
+DEFAULT_DAMPING = 1e-4
 
 
 class _RigSystem:
@@ -58,9 +59,13 @@ _SYSTEMS = ContentCache(4)  # per canonical mesh + rig
 _FITS = ContentCache(16)  # per canonical/target pair
 
 
-def _rig_system(canonical: np.ndarray, skin_indices: np.ndarray, skin_weights: np.ndarray, num_bones: int,
-                damping: float) -> _RigSystem:
-    key = (content_key(canonical, skin_indices, skin_weights), num_bones, damping)
+def _rig_key(canonical: np.ndarray, skin_indices: np.ndarray, skin_weights: np.ndarray, num_bones: int,
+             damping: float) -> tuple:
+    return (content_key(canonical, skin_indices, skin_weights), num_bones, damping)
+
+
+def _rig_system(key: tuple, canonical: np.ndarray, skin_indices: np.ndarray, skin_weights: np.ndarray,
+                num_bones: int, damping: float) -> _RigSystem:
     return _SYSTEMS.get(key, lambda: _RigSystem(canonical, skin_indices, skin_weights, num_bones, damping))
 
 
@@ -70,7 +75,7 @@ def fit_bone_transforms(
     skin_indices: np.ndarray,
     skin_weights: np.ndarray,
     num_bones: int,
-    damping: float = 1e-4,
+    damping: float = DEFAULT_DAMPING,
 ) -> np.ndarray:
     """(J, 4, 4) affine bone transforms (canonical -> target) fitted to the skinned body vertices.
 
@@ -79,9 +84,9 @@ def fit_bone_transforms(
     """
     if np.shape(canonical) != np.shape(target):
         raise ValueError(f"canonical {np.shape(canonical)} and target {np.shape(target)} must cover the same vertices")
-    system = _rig_system(canonical, skin_indices, skin_weights, num_bones, damping)
-    key = (content_key(canonical, target, skin_indices, skin_weights), num_bones, damping)
-    return _FITS.get(key, lambda: system.fit(target))
+    key = _rig_key(canonical, skin_indices, skin_weights, num_bones, damping)
+    system = _rig_system(key, canonical, skin_indices, skin_weights, num_bones, damping)
+    return _FITS.get((key, content_key(target)), lambda: system.fit(target))
 
 
 def recovered_lbs_prior(
@@ -95,6 +100,7 @@ def recovered_lbs_prior(
 ) -> np.ndarray:
     """The LBS prior from a canonical/target mesh pair of a rigged topology (no pose parameters)."""
     bones = fit_bone_transforms(canonical, target, skin_indices, skin_weights, num_bones)
-    dense = _rig_system(canonical, skin_indices, skin_weights, num_bones, 1e-4).dense
+    key = _rig_key(canonical, skin_indices, skin_weights, num_bones, DEFAULT_DAMPING)
+    dense = _rig_system(key, canonical, skin_indices, skin_weights, num_bones, DEFAULT_DAMPING).dense
     w = transfer_weights(garment, canonical, dense, k=k)
     return apply_transforms(np.asarray(garment, dtype=np.float64), blended_transforms(w, bones)).astype(np.float32)

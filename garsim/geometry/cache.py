@@ -30,15 +30,26 @@ class ContentCache:
         self.size = size
         self._items: OrderedDict[Hashable, Any] = OrderedDict()
 
-    def get(self, key: Hashable, compute: Callable[[], T]) -> T:
-        """The cached value for ``key``, computing (and storing) it on a miss."""
-        if key in self._items:
-            self._items.move_to_end(key)
-            return self._items[key]
-        value = self._items[key] = compute()
+    def peek(self, key: Hashable) -> Any | None:
+        """The cached value for ``key`` (marked recently used), or None."""
+        if key not in self._items:
+            return None
+        self._items.move_to_end(key)
+        return self._items[key]
+
+    def put(self, key: Hashable, value: T) -> T:
+        """Store ``value`` under ``key``, evicting the least recently used entry beyond ``size``."""
+        self._items[key] = value
+        self._items.move_to_end(key)
         if len(self._items) > self.size:
             self._items.popitem(last=False)
         return value
+
+    def get(self, key: Hashable, compute: Callable[[], T]) -> T:
+        """The cached value for ``key``, computing (and storing) it on a miss."""
+        if key in self._items:
+            return self.peek(key)
+        return self.put(key, compute())
 
     def clear(self) -> None:
         self._items.clear()

@@ -65,8 +65,14 @@ _NORMALS = ContentCache(8)
 
 
 def cached_vertex_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
-    """``vertex_normals`` cached by content (a body reused across garments); treat the result as read-only."""
-    return _NORMALS.get(content_key(vertices, faces), lambda: vertex_normals(vertices, faces))
+    """``vertex_normals`` cached by content (a body reused across garments); the result is read-only."""
+
+    def compute() -> np.ndarray:
+        n = vertex_normals(vertices, faces)
+        n.setflags(write=False)
+        return n
+
+    return _NORMALS.get(content_key(vertices, faces), compute)
 
 
 def uniform_laplacian(faces: np.ndarray, num_vertices: int) -> sp.csr_matrix:

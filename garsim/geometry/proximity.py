@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-from collections import OrderedDict
-
 import numpy as np
 from scipy.spatial import cKDTree
 
@@ -19,8 +17,7 @@ def cached_tree(points: np.ndarray) -> cKDTree:
     return _TREE_CACHE.get(content_key(arr), lambda: cKDTree(arr))
 
 
-_QUERY_CACHE: OrderedDict[tuple, tuple[np.ndarray, np.ndarray]] = OrderedDict()
-_QUERY_CACHE_SIZE = 4
+_QUERY_CACHE = ContentCache(4)
 
 
 def cached_nearest(points: np.ndarray, vertices: np.ndarray, k: int = 1) -> tuple[np.ndarray, np.ndarray]:
@@ -33,18 +30,14 @@ def cached_nearest(points: np.ndarray, vertices: np.ndarray, k: int = 1) -> tupl
     pts = np.ascontiguousarray(points)
     verts = np.ascontiguousarray(vertices)
     key = content_key(pts, verts)
-    hit = _QUERY_CACHE.get(key)
+    hit = _QUERY_CACHE.peek(key)
     if hit is not None and hit[0].shape[1] >= k:
-        _QUERY_CACHE.move_to_end(key)
         return hit[0][:, :k], hit[1][:, :k]
     kk = min(k, len(verts))
     dist, idx = cached_tree(verts).query(pts, k=kk)
     dist = np.asarray(dist, dtype=np.float64).reshape(len(pts), kk)
     idx = np.asarray(idx, dtype=np.int64).reshape(len(pts), kk)
-    _QUERY_CACHE[key] = (dist, idx)
-    if len(_QUERY_CACHE) > _QUERY_CACHE_SIZE:
-        _QUERY_CACHE.popitem(last=False)
-    return dist, idx
+    return _QUERY_CACHE.put(key, (dist, idx))
 
 
 def nearest_vertices(points: np.ndarray, vertices: np.ndarray, k: int = 1) -> tuple[np.ndarray, np.ndarray]:
