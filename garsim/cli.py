@@ -59,17 +59,10 @@ def cmd_drape(args: argparse.Namespace) -> int:
 def cmd_data_generate(args: argparse.Namespace) -> int:
     from garsim.physics.generate import GenerateConfig, generate
 
-    cfg = GenerateConfig(
-        out=Path(args.out),
-        seed=args.seed,
-        num_train=args.train,
-        num_test=args.test,
-        num_generalization=args.generalization,
-        target_vertices=args.vertices,
-        workers=args.workers,
-        shard=args.shard,
-        limit=args.limit,
-    )
+    given = {"num_train": args.train, "num_test": args.test, "num_ood": args.ood, "min_vertices": args.min_vertices,
+             "max_vertices": args.max_vertices, "targets_per_job": args.targets}
+    cfg = GenerateConfig(out=Path(args.out), seed=args.seed, workers=args.workers, shard=args.shard, limit=args.limit,
+                         **{k: v for k, v in given.items() if v is not None})
     summary = generate(cfg, progress=not args.quiet)
     secs = summary.pop("seconds")
     if secs:
@@ -81,7 +74,17 @@ def cmd_data_generate(args: argparse.Namespace) -> int:
 def cmd_data_info(args: argparse.Namespace) -> int:
     from garsim.data.store import DatasetStore
 
-    print(json.dumps(DatasetStore(args.dir).info(), indent=2))
+    info = DatasetStore(args.dir).info()
+    if args.json:
+        print(json.dumps(info, indent=2))
+        return 0
+    print(f"{info['root']}: {info['samples']} samples ({info['settled_samples']} settled) in {info['sequences']} "
+          f"sequences of {info['garment_instances']} garment instances, {info['rejected_sequences']} rejected")
+    for key, n in info["samples_by"].items():
+        print(f"  {key:40s} {n:6d} samples")
+    for fam, f in info["per_family"].items():
+        print(f"  {fam:12s} acceptance {f['acceptance_rate']:.0%} of {f['jobs']} jobs, "
+              f"{f['cpu_seconds_per_settled_sample']:.1f} CPU s per settled sample")
     return 0
 
 
@@ -239,17 +242,22 @@ def build_parser() -> argparse.ArgumentParser:
     p = data.add_parser("generate", help="simulate a dataset with Newton (resumable)")
     p.add_argument("--out", required=True, help="dataset folder (outside the source tree)")
     p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--train", type=int, default=300, help="training sequences (skirts, tops)")
-    p.add_argument("--test", type=int, default=50, help="test sequences (skirts, tops)")
-    p.add_argument("--generalization", type=int, default=20, help="sequences of unseen garment types")
-    p.add_argument("--vertices", type=int, default=1600, help="full-resolution garment vertices")
+    # unset values take physics.generate.GenerateConfig's defaults (not imported here: the simulator stays off the
+    # CLI's inference path; `garsim data generate` prints the settings it used in DIR/config.json)
+    p.add_argument("--train", type=int, help="training jobs (garment instances)")
+    p.add_argument("--test", type=int, help="test jobs: unseen instances, bodies, poses")
+    p.add_argument("--ood", type=int, help="out-of-distribution jobs: parameters outside every training range")
+    p.add_argument("--min-vertices", type=int, help="garment resolution, lower end")
+    p.add_argument("--max-vertices", type=int, help="garment resolution, upper end")
+    p.add_argument("--targets", type=int, help="chained target poses per job, each settled")
     p.add_argument("--workers", type=int, default=2, help="parallel simulation processes")
     p.add_argument("--shard", type=_shard, default=(0, 1), help="K/N: run every N-th job from K")
     p.add_argument("--limit", type=int, help="stop after this many sequences (smoke runs)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=cmd_data_generate)
-    p = data.add_parser("info", help="counts per split / type / fabric and disk size")
+    p = data.add_parser("info", help="counts per split / family / fabric / pose, acceptance, cost, ranges")
     p.add_argument("dir")
+    p.add_argument("--json", action="store_true", help="print everything as JSON")
     p.set_defaults(func=cmd_data_info)
     p = data.add_parser("verify", help="find missing, truncated or corrupt files")
     p.add_argument("dir")

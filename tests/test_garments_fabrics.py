@@ -1,44 +1,88 @@
-"""Fabric presets: the table, lookup, validation, and the physical ladder silk < cotton < denim < leather."""
+"""Fabrics in physical units: the presets, interpolation, sampling, and the per-hinge conversion."""
 
 from __future__ import annotations
 
 import dataclasses
+import math
 
+import numpy as np
 import pytest
 
 from garsim.data.sample import FABRICS as FABRIC_NAMES
-from garsim.garments.fabrics import FABRICS, Fabric, get_fabric
+from garsim.garments.fabrics import (
+    FABRICS,
+    GF_CM2_PER_CM,
+    PRESET_NAMES,
+    Fabric,
+    edge_bending_stiffness,
+    fabric_from_values,
+    get_fabric,
+    interpolate_fabric,
+    nearest_preset,
+    sample_fabric,
+    stiffness_coordinate,
+)
 
 
 def test_table_matches_the_one_hot_order():
-    assert tuple(FABRICS) == FABRIC_NAMES
+    assert tuple(FABRICS) == FABRIC_NAMES == PRESET_NAMES
     for name, fabric in FABRICS.items():
         assert fabric.name == name
 
 
-def test_bending_and_density_increase_from_silk_to_leather():
-    # Bending stiffness is the lever that separates drapes (DESIGN.md); it grows >= 3x per step.
-    ladder = [FABRICS[n] for n in ("silk", "cotton", "denim", "leather")]
+def test_presets_lie_in_published_ranges_and_are_ordered():
+    # Kawabata bending rigidity in gf cm^2/cm: silk ~0.005-0.05, cotton 0.05-0.2, denim 0.5-3, leather ~10
+    kes = {n: f.bending / GF_CM2_PER_CM for n, f in FABRICS.items()}
+    assert 0.005 <= kes["silk"] <= 0.05 and 0.05 <= kes["cotton"] <= 0.2
+    assert 0.5 <= kes["denim"] <= 3.0 and 5.0 <= kes["leather"] <= 20.0
+    ladder = [FABRICS[n] for n in PRESET_NAMES]
     for a, b in zip(ladder, ladder[1:]):
-        assert b.edge_ke >= 3 * a.edge_ke
-        assert b.density > a.density
-        assert b.tri_ke >= a.tri_ke
+        assert b.bending >= 3 * a.bending and b.density > a.density
+    # Peirce's bending length: ~1 cm silk ... ~5+ cm leather
+    assert 0.005 < FABRICS["silk"].bending_length < 0.015 < FABRICS["leather"].bending_length
 
 
-def test_bending_length_scale_orders_fabrics():
-    # Discrete bending 0.5*ke*L*theta^2 ~ continuum modulus B = ke*h for edge length h; the gravity
-    # bending length (B / (density * g))^(1/3) sets fold size: silk ~1 cm, leather >> 10 cm (h = 3 cm).
-    h = 0.03
-    lengths = {n: (f.edge_ke * h / (f.density * 9.81)) ** (1 / 3) for n, f in FABRICS.items()}
-    assert lengths["silk"] < 0.02
-    assert lengths["silk"] < lengths["cotton"] < lengths["denim"] < lengths["leather"]
-    assert lengths["leather"] > 0.2
+def test_hinge_stiffness_of_an_equilateral_pair_by_hand():
+    # two equilateral triangles of side a sharing an edge: A1 + A2 = sqrt(3)/2 a^2, so ke = 3 B a / (sqrt(3)/2 a^2)
+    a, b = 0.02, 1e-5
+    v = np.array([[0, 0, 0], [a, 0, 0], [a / 2, a * math.sqrt(3) / 2, 0], [a / 2, -a * math.sqrt(3) / 2, 0]])
+    hinges = np.array([[2, 3, 0, 1], [-1, 3, 0, 3]])  # an interior hinge and a border edge
+    ke = edge_bending_stiffness(b, v, hinges)
+    assert ke[0] == pytest.approx(2 * math.sqrt(3) * b / a) and ke[1] == 0.0
+    # halving the mesh spacing doubles the hinge stiffness (same fabric, same drape)
+    assert edge_bending_stiffness(b, v / 2, hinges)[0] == pytest.approx(2 * ke[0])
+    # a sliver triangle does not give an unbounded hinge
+    sliver = v.copy()
+    sliver[2, 1] = 1e-9
+    sliver[3, 1] = -1e-9
+    assert edge_bending_stiffness(b, sliver, hinges)[0] <= 3 * b * a / (0.1 * a * a) * 1.0001
+
+
+def test_interpolation_between_presets_is_monotone_and_exact_at_the_ends():
+    a = interpolate_fabric("silk", "leather", 0.0)
+    assert a.values() == pytest.approx(FABRICS["silk"].values())
+    assert interpolate_fabric("silk", "leather", 1.0).bending == pytest.approx(FABRICS["leather"].bending)
+    mids = [interpolate_fabric("cotton", "denim", t) for t in (0.25, 0.5, 0.75)]
+    assert FABRICS["cotton"].bending < mids[0].bending < mids[1].bending < mids[2].bending < FABRICS["denim"].bending
+    assert stiffness_coordinate("silk") == pytest.approx(0.0) and stiffness_coordinate("leather") == pytest.approx(1.0)
+    assert nearest_preset(mids[0]) == "cotton" and nearest_preset(mids[2]) == "denim"
+    with pytest.raises(ValueError, match="t must be in"):
+        interpolate_fabric("silk", "denim", 1.5)
+
+
+def test_sampled_fabrics_stay_between_silk_and_leather_and_round_trip():
+    rng = np.random.default_rng(0)
+    samples = [sample_fabric(rng) for _ in range(200)]
+    coords = np.array([stiffness_coordinate(f) for f in samples])
+    assert coords.min() >= -1e-9 and coords.max() <= 1 + 1e-9 and coords.std() > 0.2  # log-uniform spread
+    for f in samples[:5]:
+        assert fabric_from_values(f.values()).values() == f.values()
 
 
 def test_get_fabric_by_name_or_instance():
     assert get_fabric("silk") is FABRICS["silk"]
     assert get_fabric(" Denim ") is FABRICS["denim"]
-    custom = dataclasses.replace(FABRICS["cotton"], name="stiff-cotton", edge_ke=0.5)
+    custom = dataclasses.replace(FABRICS["cotton"], name="stiff-cotton", bending=1e-4)
     assert get_fabric(custom) is custom
 
 
@@ -53,6 +97,8 @@ def test_presets_are_frozen_and_validated():
     with pytest.raises(dataclasses.FrozenInstanceError):
         FABRICS["silk"].density = 1.0  # type: ignore[misc]
     with pytest.raises(ValueError, match="density"):
-        Fabric("bad", density=-0.1, tri_ke=1e3, tri_ka=1e3, tri_kd=0, edge_ke=1e-3, edge_kd=0, friction=0.5)
-    with pytest.raises(ValueError, match="edge_ke"):
-        Fabric("bad", density=0.1, tri_ke=1e3, tri_ka=1e3, tri_kd=0, edge_ke=float("nan"), edge_kd=0, friction=0.5)
+        Fabric("bad", bending=1e-5, density=-0.1, stretch=1e3)
+    with pytest.raises(ValueError, match="bending"):
+        Fabric("bad", bending=float("nan"), density=0.1, stretch=1e3)
+    with pytest.raises(ValueError, match="bending must be > 0"):
+        Fabric("bad", bending=0.0, density=0.1, stretch=1e3)

@@ -80,6 +80,25 @@ class JointLimits:
                 raise ValueError(f"joint limit {f.name}=({lo}, {hi}) must be finite degrees with low <= high, |.| <= 180")
 
 
+EVERYDAY_LIMITS = JointLimits(
+    hip_flexion=(-10.0, 40.0),
+    hip_abduction=(-5.0, 12.0),
+    hip_rotation=(-15.0, 15.0),
+    knee_flexion=(0.0, 45.0),
+    spine_flexion=(-8.0, 20.0),
+    spine_lateral=(-8.0, 8.0),
+    spine_twist=(-15.0, 15.0),
+    shoulder_elevation=(-75.0, 25.0),
+    shoulder_flexion=(-20.0, 50.0),
+    shoulder_twist=(-20.0, 20.0),
+    elbow_flexion=(0.0, 70.0),
+    neck_flexion=(-10.0, 20.0),
+    neck_lateral=(-10.0, 10.0),
+    neck_twist=(-20.0, 20.0),
+)
+"""Everyday poses (standing, stepping, arms down to raised, mild bending): the ranges users' poses mostly fall in."""
+
+
 SIDED_DOFS: tuple[str, ...] = (
     "hip_flexion", "hip_abduction", "hip_rotation", "knee_flexion",
     "shoulder_elevation", "shoulder_flexion", "shoulder_twist", "elbow_flexion",

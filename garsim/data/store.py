@@ -242,22 +242,70 @@ class DatasetStore:
 
     # -- inspection ----------------------------------------------------------------------
     def info(self) -> dict[str, Any]:
-        """Counts of sequences and frames per split / garment type / fabric, and disk size."""
+        """What the dataset holds: samples (settled / dynamic) per split, family, construction, fabric, canonical
+        pose; paired-fabric groups; acceptance rate and CPU seconds per family; vertex and phenotype ranges."""
+        if not (self.root / MANIFEST).exists():
+            raise StoreError(f"{self.root} is not a garsim dataset folder (no {MANIFEST}); "
+                             "make one with `garsim data generate --out DIR`")
         entries = self.entries()
-        frames: Counter[str] = Counter()
+        rejected = self.entries(REJECTED)
+        samples: Counter[str] = Counter()
         seqs: Counter[str] = Counter()
         for e in entries:
-            for key in (f"split={e['split']}", f"type={e['garment_type']}", f"fabric={e['fabric']}"):
+            keys = [f"split={e['split']}", f"family={e['garment_type']}", f"fabric={e['fabric']}"]
+            keys += [f"{k}={e[k]}" for k in ("construction", "canonical_pose", "fabric_name") if k in e]
+            keys += [f"split={e['split']}/family={e['garment_type']}"]
+            for key in keys:
                 seqs[key] += 1
-                frames[key] += e["num_frames"]
+                samples[key] += e["num_frames"]
+        paired = [e for e in entries if e.get("paired")]
+        groups: dict[str, set[str]] = {}
+        for e in paired:
+            groups.setdefault(e["job"], set()).add(e.get("fabric_name", e["fabric"]))
+        jobs_by_family: dict[str, set[str]] = {}
+        cpu: Counter[str] = Counter()
+        stored_samples: Counter[str] = Counter()
+        for e in entries + rejected:
+            fam = e.get("garment_type", e.get("family", "?"))
+            jobs_by_family.setdefault(fam, set())
+            cpu[fam] += float(e.get("cpu_seconds", 0.0))
+        accepted_jobs: dict[str, set[str]] = {}
+        for e in entries:
+            accepted_jobs.setdefault(e["garment_type"], set()).add(e.get("job", e["id"]))
+            stored_samples[e["garment_type"]] += e["num_frames"]
+        for e in entries + rejected:
+            jobs_by_family[e.get("garment_type", e.get("family", "?"))].add(e.get("job", e["id"]))
+        per_family = {
+            fam: {
+                "jobs": len(jobs),
+                "accepted_jobs": len(accepted_jobs.get(fam, ())),
+                "acceptance_rate": round(len(accepted_jobs.get(fam, ())) / max(len(jobs), 1), 3),
+                "cpu_seconds": round(cpu[fam], 1),
+                "cpu_seconds_per_settled_sample": round(cpu[fam] / max(stored_samples[fam], 1), 2),
+            }
+            for fam, jobs in sorted(jobs_by_family.items())
+        }
+        verts = [e["num_vertices"]["full"] for e in entries if "num_vertices" in e]
+        phen = [e["phenotype"] for e in entries if "phenotype" in e]
         return {
             "root": str(self.root),
             "sequences": len(entries),
-            "frames": sum(e["num_frames"] for e in entries),
-            "rejected": len(self.entries(REJECTED)),
+            "samples": sum(e["num_frames"] for e in entries),
+            "settled_samples": sum(e.get("num_settled", e["num_frames"]) for e in entries),
+            "dynamic_samples": sum(e["num_frames"] - e.get("num_settled", e["num_frames"]) for e in entries),
+            "garment_instances": len({e.get("job", e["id"]) for e in entries}),
+            "rejected_sequences": len(rejected),
+            "rejection_reasons": dict(Counter(e.get("reason", "?") for e in rejected)),
+            "paired_groups": sum(len(f) >= 2 for f in groups.values()),
+            "paired_complete_groups": sum(len(f) == 4 for f in groups.values()),
+            "paired_samples": sum(e["num_frames"] for e in paired),
+            "paired_train_samples": sum(e["num_frames"] for e in paired if e["split"] == "train"),
+            "per_family": per_family,
+            "vertices": {"min": min(verts), "max": max(verts)} if verts else {},
+            "phenotype": {k: [min(p[k] for p in phen), max(p[k] for p in phen)] for k in (phen[0] if phen else {})},
             "bytes": sum(e["bytes"] for e in entries),
             "sequences_by": dict(sorted(seqs.items())),
-            "frames_by": dict(sorted(frames.items())),
+            "samples_by": dict(sorted(samples.items())),
         }
 
     def verify(self) -> list[str]:

@@ -215,7 +215,7 @@ class SkirtParams(_Params):
     waist_height: float = 0.0  # waistband offset from the natural waist (negative = low rise)
     looseness: float = 0.015
     RANGES: ClassVar[dict[str, tuple[float, float, float, float]]] = {
-        "length": (0.15, 1.1, 0.25, 0.7),
+        "length": (0.15, 1.1, 0.22, 0.8),
         "flare": (0.0, 1.2, 0.05, 0.7),
         "waist_height": (-0.15, 0.08, -0.08, 0.04),
         "looseness": (0.008, 0.08, 0.01, 0.03),
@@ -267,7 +267,7 @@ class TrousersParams(_Params):
     looseness: float = 0.02
     leg_opening: float = 0.07  # minimum radius of the leg tubes (straight vs. slim legs)
     RANGES: ClassVar[dict[str, tuple[float, float, float, float]]] = {
-        "length": (0.25, 1.2, 0.4, 0.95),
+        "length": (0.25, 1.2, 0.32, 0.95),  # shorts (mid-thigh) to ankle
         "waist_height": (-0.12, 0.08, -0.06, 0.04),
         "looseness": (0.01, 0.06, 0.015, 0.035),
         "leg_opening": (0.0, 0.15, 0.05, 0.1),
@@ -314,12 +314,31 @@ def garment_params(kind: str, params: dict[str, float] | None = None) -> _Params
     return cls(**params)
 
 
-def sample_garment_params(kind: str, rng: np.random.Generator) -> dict[str, float]:
-    """Random parameters of ``kind`` drawn uniformly from each field's sampling range."""
+OOD_REACH = 0.6
+"""The out-of-distribution region of a parameter reaches this fraction of the way from its sampling
+range to its valid limit, on both sides."""
+
+
+def sample_garment_params(kind: str, rng: np.random.Generator, region: str = "train") -> dict[str, float]:
+    """Random parameters of ``kind``: uniform in each field's sampling range (``region="train"``), or
+    (``"ood"``) every field just outside it, between the sampling range and the valid limits, on a random side."""
     if kind not in PARAMS:
         raise ValueError(f"unknown garment kind {kind!r}; choose one of {tuple(PARAMS)}")
+    if region not in ("train", "ood"):
+        raise ValueError(f"region must be 'train' or 'ood', got {region!r}")
     ranges = PARAMS[kind].RANGES
-    return {name: float(rng.uniform(r[2], r[3])) for name, r in ranges.items()}
+    if region == "train":
+        return {name: float(rng.uniform(r[2], r[3])) for name, r in ranges.items()}
+    out = {}
+    for name, (v_lo, v_hi, s_lo, s_hi) in ranges.items():
+        below, above = s_lo - v_lo, v_hi - s_hi
+        if above > 0 and (below <= 0 or rng.uniform() < 0.5):
+            out[name] = float(s_hi + rng.uniform(0.05, OOD_REACH) * above)
+        elif below > 0:
+            out[name] = float(s_lo - rng.uniform(0.05, OOD_REACH) * below)
+        else:
+            out[name] = float(rng.uniform(s_lo, s_hi))
+    return out
 
 
 # ---------------------------------------------------------------------------------------------

@@ -1,17 +1,33 @@
-"""Resumable, parallel dataset generation: sample garments, fabrics, bodies and poses from a
-seed, simulate them with Newton, reject bad results, store full + low resolution samples.
+"""Resumable, parallel dataset generation (ground truth v2): settled drapes of six garment families
+from two independent constructions, on Anny bodies in T-, A- and in-between canonical poses, moved
+through chains of everyday and wider target poses, in preset, paired and physically sampled fabrics.
 
-Every sequence is a job planned from ``(seed, index)`` alone, so a run can be split across
-machines (``shard``), interrupted and resumed (finished and rejected ids are skipped), and
-regenerated bit-for-bit from its seed.
+One job = one garment instance (family, construction, parameters, resolution) on one body:
+build it on the T-pose body, skin it to the job's canonical pose, settle it there (the template),
+then move the body through ``targets_per_job`` target poses in turn and let the cloth settle at
+each (the body holds still until the mean speed is below ``SimConfig.settle_speed``); every
+settled state paired with the template is one sample. A paired-fabric job simulates the same
+template in all four preset fabrics at once (one Newton model, four copies), so the fabric alone
+explains the differences. Each fabric copy is stored as one sequence record (its K settled states).
+
+Every job is planned from ``(seed, index)`` alone, so a run can be split across machines
+(``shard``), stopped and resumed (jobs with a stored or rejected record are skipped), and
+regenerated bit-for-bit from its seed. The dataset folder keeps the generation settings
+(``config.json``); a rerun with other settings is refused, naming the setting that differs.
+A simulation result the physics checks refuse is a permanent rejection; any other error (a
+failed write, a killed worker) is logged and retried on the next run.
 """
 
 from __future__ import annotations
 
 import contextlib
+import ctypes
+import json
 import logging
+import math
 import multiprocessing as mp
 import os
+import signal
 import time
 import traceback
 from collections import Counter
@@ -22,299 +38,467 @@ from typing import Any
 
 import numpy as np
 
-from garsim.data.sample import FABRICS
+from garsim.atomic import atomic_write_bytes
 from garsim.data.store import REJECTED, DatasetStore, GarmentLevel, SequenceRecord
 
 log = logging.getLogger(__name__)
 
-TRAIN_TYPES: tuple[str, ...] = ("skirt", "top")
-GENERALIZATION_TYPES: tuple[str, ...] = ("tshirt", "trousers", "dress")
+CONFIG_FILE = "config.json"
+ERRORS = "errors.jsonl"
+FAMILIES: tuple[str, ...] = ("skirt", "top", "tshirt", "longsleeve", "trousers", "dress")
+TEMPLATE_FAMILIES: tuple[str, ...] = ("skirt", "top", "tshirt", "trousers", "dress")
+"""Families the parametric templates build (long sleeves come from the implicit construction only)."""
+SLEEVED: frozenset[str] = frozenset({"tshirt", "longsleeve"})
+CONSTRUCTIONS: tuple[str, ...] = ("template", "implicit")
 PHENOTYPE_RANGES: dict[str, tuple[float, float]] = {
     "gender": (0.0, 1.0),
-    "age": (0.35, 0.9),
-    "muscle": (0.2, 0.8),
-    "weight": (0.2, 0.8),
-    "height": (0.2, 0.8),
-    "proportions": (0.3, 0.7),
+    "age": (0.3, 1.0),
+    "muscle": (0.0, 1.0),
+    "weight": (0.0, 1.0),
+    "height": (0.0, 1.0),
+    "proportions": (0.0, 1.0),
 }
+T_POSE_ARM = 40.0
+"""Canonical arm raise (degrees above Anny's rest A-pose) of the T-pose; 0 is the A-pose."""
+PAIRED_TEMPLATE_FABRIC = "cotton"
+"""A paired group's template is settled once, in this fabric, then simulated in all four."""
+
+# Job indices are laid out in a fixed repeating block of (split, slots): a split of N jobs takes its
+# first N slots across blocks, so growing one split appends jobs and never renumbers (or reseeds) a job.
+INDEX_BLOCK: tuple[tuple[str, int], ...] = (("train", 40), ("test", 6), ("ood", 2))
+SPLITS: tuple[str, ...] = tuple(name for name, _ in INDEX_BLOCK)
 
 
 @dataclass
 class GenerateConfig:
-    """What to generate; the seed and these numbers fully determine the dataset."""
+    """What to generate; the seed and these settings fully determine the dataset."""
 
     out: Path
     seed: int = 0
-    num_train: int = 300  # sequences (skirts and tops)
-    num_test: int = 50  # sequences (skirts and tops; unseen instances, shapes, poses)
-    num_generalization: int = 20  # sequences of garment types never used in training
-    target_vertices: int = 1600  # full-resolution garment size
-    low_ratio: float = 0.25  # low resolution = this fraction of the full vertex count
-    motion_frames: int = 24  # canonical -> target over this many frames (0.8 s at 30 fps)
-    store_every: int = 2  # store every k-th motion frame (from frame k on) and the final settled frame
+    num_train: int = 600  # jobs (garment instances) per split; each yields up to targets x fabrics samples
+    num_test: int = 90
+    num_ood: int = 30
+    targets_per_job: int = 3  # chained target poses, each settled
+    min_vertices: int = 300  # garment resolution, log-uniform in [min, max]
+    max_vertices: int = 2500
+    max_paired_vertices: int = 1500  # paired groups simulate four copies: cap their resolution
+    paired_every: int = 4  # every k-th job is a paired-fabric group (all four presets)
+    physical_share: float = 0.5  # share of the other jobs with fabric values sampled between silk and leather
+    motion_frames: int = 12  # frames from one pose to the next
+    low_ratio: float = 0.25  # low resolution = this fraction of the vertices (at least MIN_LOW_VERTICES)
     workers: int = 2
     shard: tuple[int, int] = (0, 1)  # (k, n): run jobs with index % n == k
-    limit: int | None = None  # run at most this many pending jobs (for smoke runs)
+    limit: int | None = None  # run at most this many pending jobs (smoke runs)
     sim: dict[str, Any] = field(default_factory=dict)  # SimConfig overrides
 
     def __post_init__(self) -> None:
         self.out = Path(self.out)
+        self.shard = tuple(self.shard)  # type: ignore[assignment]
         k, n = self.shard
         if not (n >= 1 and 0 <= k < n):
             raise ValueError(f"shard must be K/N with 0 <= K < N, got {k}/{n}")
-        if min(self.num_train, self.num_test, self.num_generalization) < 0:
-            raise ValueError("sequence counts must be >= 0")
-        if self.motion_frames < 2 or self.store_every < 1:
-            raise ValueError("motion_frames >= 2 and store_every >= 1 required")
+        if min(self.num_train, self.num_test, self.num_ood) < 0:
+            raise ValueError("job counts must be >= 0")
+        if self.targets_per_job < 1 or self.motion_frames < 2:
+            raise ValueError("targets_per_job >= 1 and motion_frames >= 2 required")
+        if not (100 <= self.min_vertices <= self.max_vertices <= 30000):
+            raise ValueError(f"need 100 <= min_vertices <= max_vertices <= 30000, got {self.min_vertices}, {self.max_vertices}")
         if not (0.05 <= self.low_ratio <= 1.0):
             raise ValueError(f"low_ratio must be in [0.05, 1], got {self.low_ratio}")
-        if self.workers < 1:
-            raise ValueError(f"workers must be >= 1, got {self.workers}")
+        if self.workers < 1 or self.paired_every < 1 or not (0.0 <= self.physical_share <= 1.0):
+            raise ValueError("workers >= 1, paired_every >= 1 and physical_share in [0, 1] required")
+
+    def settings(self) -> dict[str, Any]:
+        """The settings a dataset folder is bound to (counts may grow, the rest must match)."""
+        d = asdict(self)
+        for key in ("out", "num_train", "num_test", "num_ood", "workers", "shard", "limit"):
+            d.pop(key)
+        return json.loads(json.dumps(d))
+
+
+MIN_LOW_VERTICES = 120
 
 
 @dataclass
 class JobSpec:
-    """One sequence to simulate."""
+    """One garment instance to simulate (planned from the seed and its index alone)."""
 
-    seq_id: str
+    job_id: str
     index: int
     split: str
-    garment_type: str
+    family: str
+    construction: str
     garment_params: dict[str, Any]
-    fabric: str
+    vertices: int
+    fabrics: list[dict[str, Any]]  # one entry per simulated copy: name + physical values
+    paired: bool
     phenotype: dict[str, float]
+    canonical_arm: float  # degrees above the A-pose (0 = A-pose, 40 = T-pose)
+    pose_modes: list[str]  # per target: everyday / walk / wide
     pose_seed: int
 
-
-# Job indices are laid out in a fixed repeating block of (split, slots): block b holds train indices
-# 370b..370b+299, test 370b+300..370b+349, generalization 370b+350..370b+369. A split of N sequences
-# takes its first N slots across blocks, so growing one split appends jobs and never renumbers (or
-# reseeds) a sequence of any split: an existing dataset stays valid when it is grown.
-INDEX_BLOCK: tuple[tuple[str, int], ...] = (("train", 300), ("test", 50), ("generalization", 20))
-SPLIT_TYPES: dict[str, tuple[str, ...]] = {
-    "train": TRAIN_TYPES, "test": TRAIN_TYPES, "generalization": GENERALIZATION_TYPES,
-}
+    def copy_id(self, fabric_name: str) -> str:
+        """The sequence id of one fabric copy."""
+        return f"{self.job_id}-{fabric_name}" if self.paired else self.job_id
 
 
 def split_indices(split: str, count: int) -> list[int]:
-    """Global job indices of the first ``count`` sequences of ``split`` in the repeating block layout."""
+    """Global job indices of the first ``count`` jobs of ``split`` in the repeating block layout."""
     block = sum(n for _, n in INDEX_BLOCK)
     offset = 0
     for name, slots in INDEX_BLOCK:
         if name == split:
             return [(j // slots) * block + offset + j % slots for j in range(count)]
         offset += slots
-    raise ValueError(f"unknown split {split!r}; expected one of {[n for n, _ in INDEX_BLOCK]}")
+    raise ValueError(f"unknown split {split!r}; expected one of {SPLITS}")
+
+
+def _canonical_arm(rng: np.random.Generator) -> float:
+    u = rng.uniform()
+    if u < 1 / 3:
+        return T_POSE_ARM
+    if u < 2 / 3:
+        return 0.0
+    return round(float(rng.uniform(5.0, 35.0)), 2)
+
+
+def _pose_modes(family: str, rng: np.random.Generator, count: int) -> list[str]:
+    """Everyday poses for all; walking frames and the sampler's wide range where the family survives them."""
+    if family in SLEEVED:
+        return ["everyday"] * count
+    if family in ("skirt", "top"):
+        return [str(m) for m in rng.choice(["everyday", "walk", "wide"], size=count, p=[0.55, 0.25, 0.2])]
+    return [str(m) for m in rng.choice(["everyday", "walk"], size=count, p=[0.7, 0.3])]
 
 
 def plan_jobs(config: GenerateConfig) -> list[JobSpec]:
     """All jobs of the dataset, deterministic in the seed (independent of shard and workers)."""
+    from garsim.garments.fabrics import FABRICS, PRESET_NAMES, sample_fabric
+    from garsim.garments.implicit import sample_implicit_params
     from garsim.garments.templates import sample_garment_params
 
-    counts = {"train": config.num_train, "test": config.num_test, "generalization": config.num_generalization}
+    counts = {"train": config.num_train, "test": config.num_test, "ood": config.num_ood}
     jobs = []
     for split, count in counts.items():
-        types = SPLIT_TYPES[split]
-        for i in split_indices(split, count):
+        for j, i in enumerate(split_indices(split, count)):
             rng = np.random.default_rng([config.seed, i])
-            kind = types[i % len(types)]
-            fabric = FABRICS[(i // len(types)) % len(FABRICS)]
-            phenotype = {k: round(float(rng.uniform(lo, hi)), 4) for k, (lo, hi) in PHENOTYPE_RANGES.items()}
-            params = sample_garment_params(kind, rng)
-            jobs.append(
-                JobSpec(
-                    seq_id=f"{split}-{i:05d}",
-                    index=i,
-                    split=split,
-                    garment_type=kind,
-                    garment_params=params,
-                    fabric=fabric,
-                    phenotype=phenotype,
-                    pose_seed=int(rng.integers(2**31)),
-                )
-            )
+            if split == "ood":  # templates with parameters beyond every training sample's range
+                family = TEMPLATE_FAMILIES[j % len(TEMPLATE_FAMILIES)]
+                construction = "template"
+                params = sample_garment_params(family, rng, region="ood")
+            else:
+                family = FAMILIES[j % len(FAMILIES)]
+                construction = "implicit" if family not in TEMPLATE_FAMILIES else CONSTRUCTIONS[(j // len(FAMILIES)) % 2]
+                params = (sample_garment_params(family, rng) if construction == "template"
+                          else sample_implicit_params(family, rng))
+            paired = j % config.paired_every == config.paired_every - 1
+            hi = config.max_paired_vertices if paired else config.max_vertices
+            lo = min(config.min_vertices, hi)
+            vertices = int(round(math.exp(rng.uniform(math.log(lo), math.log(hi)))))
+            if paired:
+                fabrics = [{"name": n, **FABRICS[n].values()} for n in PRESET_NAMES]
+            elif rng.uniform() < config.physical_share:
+                fab = sample_fabric(rng)
+                fabrics = [{"name": "custom", **fab.values()}]
+            else:
+                name = PRESET_NAMES[int(rng.integers(len(PRESET_NAMES)))]
+                fabrics = [{"name": name, **FABRICS[name].values()}]
+            phenotype = {k: round(float(rng.uniform(a, b)), 4) for k, (a, b) in PHENOTYPE_RANGES.items()}
+            jobs.append(JobSpec(
+                job_id=f"{split}-{i:05d}", index=i, split=split, family=family, construction=construction,
+                garment_params=params, vertices=vertices, fabrics=fabrics, paired=paired, phenotype=phenotype,
+                canonical_arm=_canonical_arm(rng), pose_modes=_pose_modes(family, rng, config.targets_per_job),
+                pose_seed=int(rng.integers(2**31)),
+            ))
     return jobs
 
 
-def stored_frame_indices(num_frames: int, motion_frames: int, store_every: int) -> np.ndarray:
-    """Motion frames store_every, 2*store_every, ... below motion_frames, and the last (settled) frame."""
-    idx = list(range(store_every, motion_frames, store_every))
-    idx.append(num_frames - 1)
-    return np.unique(np.asarray(idx, dtype=np.int64))
+# -- one job ---------------------------------------------------------------------------------------
+def _arm_pose(arm: float) -> dict[str, np.ndarray]:
+    """Anny pose with both upper arms raised ``arm`` degrees above the rest A-pose (40 = the T-pose)."""
+    a = math.radians(arm)
+    return {"upperarm01.L": np.array([0.0, -a, 0.0]), "upperarm01.R": np.array([0.0, a, 0.0])}
 
 
-def simulate_job(job: JobSpec, config: GenerateConfig) -> SequenceRecord:
-    """Simulate one sequence; raises ``SimulationRejected`` for results that must not be stored."""
+def target_poses(job: JobSpec, body: Any) -> list[dict[str, np.ndarray]]:
+    """The job's chain of target poses (bone -> axis-angle), drawn from its pose seed."""
+    from dataclasses import replace
+
+    from garsim.bodies.poses import EVERYDAY_LIMITS, JointLimits, PoseSampler, walk_pose
+
+    rng = np.random.default_rng(job.pose_seed)
+    everyday = EVERYDAY_LIMITS
+    if job.family in SLEEVED:  # sleeves cut for the canonical arms survive arms within ~-50..+25 deg of it
+        lo, hi = everyday.shoulder_elevation
+        everyday = replace(everyday, shoulder_elevation=(max(lo, job.canonical_arm - 50.0), min(hi, job.canonical_arm + 25.0)))
+    poses = []
+    for k, mode in enumerate(job.pose_modes):
+        seed = int(rng.integers(2**31))
+        if mode == "walk":
+            phase = float(rng.uniform(0.0, 2.0 * math.pi))
+            poses.append({b: v[0] for b, v in walk_pose(phase, stride=float(rng.uniform(0.3, 0.7))).items()})
+        else:
+            limits = everyday if mode == "everyday" else JointLimits()
+            poses.append(PoseSampler(limits, seed=seed, body=body).sample(1)[0])
+    return poses
+
+
+def build_garment(job: JobSpec, body: Any) -> Any:
+    """The job's garment on the T-pose canonical body (either construction)."""
+    from garsim.garments.implicit import make_implicit_garment
+    from garsim.garments.templates import make_garment
+
+    if job.construction == "template":
+        g = make_garment(job.family, body, job.garment_params, target_vertices=job.vertices)
+    else:
+        g = make_implicit_garment(job.family, body.canonical().vertices, body.faces, body.skin_indices,
+                                  body.skin_weights, body.bone_labels, job.garment_params, target_vertices=job.vertices)
+    g.params["construction"] = job.construction
+    return g
+
+
+def simulate_job(job: JobSpec, config: GenerateConfig) -> tuple[list[SequenceRecord], list[dict[str, Any]]]:
+    """Simulate one job: the stored records (one per fabric copy with at least one accepted state) and
+    the rejections (copy id, reason, detail). Raises ``SimulationRejected`` when the template itself fails."""
     from garsim.bodies.anny import AnnyBody
-    from garsim.bodies.poses import PoseSampler, pose_sequence
+    from garsim.bodies.base import PosedBody
+    from garsim.bodies.poses import batched_matrices, interpolate_poses, stack_poses
+    from garsim.bodies.prior import garment_prior
+    from garsim.garments.fabrics import fabric_from_values, nearest_preset
     from garsim.garments.garment import Garment
     from garsim.garments.remesh import decimate, transfer_barycentric
-    from garsim.garments.templates import make_garment
-    from garsim.geometry.skinning import dense_weights, lbs_prior, transfer_weights
     from garsim.physics.newton_sim import (
         SimConfig,
         SimulationRejected,
         check_result,
         rest_edge_lengths,
         settle,
-        simulate_motion,
+        simulate_poses,
     )
 
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), time.process_time()
     sim_cfg = SimConfig(**config.sim)
     body = AnnyBody(job.phenotype)
-    canonical = body.canonical()
-    garment = make_garment(job.garment_type, body, job.garment_params, target_vertices=config.target_vertices)
+    tpose = body.canonical()
+    garment = build_garment(job, body)
+    arm_pose = _arm_pose(job.canonical_arm)
+    canonical = body.pose(arm_pose)
+    if job.canonical_arm != T_POSE_ARM:  # skin the T-pose garment to the job's canonical arms
+        moved = garment_prior(body, tpose, canonical, garment.vertices)
+        garment = Garment(moved, garment.faces, garment.pinned, garment.kind, garment.params)
     rest = rest_edge_lengths(garment.vertices, garment.faces)
-    template, settle_info = settle(garment, canonical.vertices, body.faces, job.fabric, sim_cfg)
-    ok, reason = check_result(template, garment.faces, rest, canonical.vertices, body.faces, pinned=garment.pinned)
-    if not ok:
-        raise SimulationRejected(reason.split(":")[0], "settle: " + reason)
+    fabrics = [fabric_from_values({k: v for k, v in f.items() if k != "name"}, f["name"]) for f in job.fabrics]
+    settle_fabric = fabric_from_values(
+        {k: v for k, v in next(f for f in job.fabrics if f["name"] == PAIRED_TEMPLATE_FABRIC).items() if k != "name"},
+        PAIRED_TEMPLATE_FABRIC) if job.paired else fabrics[0]
+    template, settle_info = settle(garment, canonical.vertices, body.faces, settle_fabric, sim_cfg)
+    try:
+        check_result(template, garment.faces, rest, canonical.vertices, body.faces, pinned=garment.pinned)
+    except SimulationRejected as exc:
+        raise SimulationRejected(exc.reason, "settle: " + exc.detail) from None
+    if not settle_info["settled"]:
+        raise SimulationRejected("unsettled", f"template still moving at {settle_info['final_speed']} m/s "
+                                 f"after {settle_info['frames']} frames")
 
-    target_pose = PoseSampler(seed=job.pose_seed).sample(1)[0]
-    body_frames, transforms = pose_sequence(body, target_pose, config.motion_frames)
-    body_w = dense_weights(body.skin_indices, body.skin_weights, len(body.bone_labels))
-    weights = transfer_weights(template, canonical.vertices, body_w, k=4)
+    poses = target_poses(job, body)
     pins = np.flatnonzero(garment.pinned)
-    pin_targets = np.stack([lbs_prior(template[pins], weights[pins], canonical.transforms, t) for t in transforms])
-    frames, motion_info = simulate_motion(
-        template, garment.faces, garment.pinned, body_frames, body.faces, pin_targets, job.fabric, sim_cfg
-    )
-    if motion_info["aborted"]:  # stopped early (exploding): fewer frames than planned, nothing to store
-        raise SimulationRejected(motion_info["aborted"], f"{motion_info['aborted']}: simulation stopped at frame "
-                                 f"{len(frames) - 1} (an edge beyond {sim_cfg.abort_stretch}x rest, or non-finite)")
-    keep = stored_frame_indices(len(frames), config.motion_frames, config.store_every)
-    body_idx = np.minimum(keep, config.motion_frames - 1)  # hold frames keep the target pose
-    ok, reason = check_result(frames[keep], garment.faces, rest, body_frames[body_idx], body.faces,
-                              pinned=garment.pinned)
-    if not ok:
-        raise SimulationRejected(reason.split(":")[0], reason)
-    if not motion_info["settled"]:
-        log.info("%s: final frame not fully settled (mean speed %.3f m/s)", job.seq_id, motion_info["final_speed"])
+    chain = [arm_pose, *poses]
+    body_segs, pin_segs, targets = [], [], []
+    for a, b in zip(chain[:-1], chain[1:]):
+        verts, transforms = body.pose_batch(batched_matrices(stack_poses(interpolate_poses(a, b, config.motion_frames + 1))))
+        body_segs.append(verts)
+        pin_segs.append(np.stack([garment_prior(body, canonical, PosedBody(v, t), template)[pins]
+                                  for v, t in zip(verts, transforms)]))
+        targets.append(PosedBody(verts[-1], transforms[-1]))
+    states, infos = simulate_poses(template, garment.faces, garment.pinned, body_segs, body.faces, pin_segs,
+                                   fabrics, sim_cfg)
 
-    targets = frames[keep]
-    priors = np.stack([lbs_prior(template, weights, canonical.transforms, transforms[b]) for b in body_idx])
-    full = GarmentLevel(template, garment.faces, garment.pinned, priors, targets)
+    priors = [garment_prior(body, canonical, t, template) for t in targets[: len(states)]]
+    low_garment, mapping = decimate(Garment(template, garment.faces, garment.pinned, garment.kind, garment.params),
+                                    ratio=max(config.low_ratio, min(1.0, MIN_LOW_VERTICES / len(template))))
+    low_priors = [garment_prior(body, canonical, t, low_garment.vertices) for t in targets[: len(states)]]
+    seconds = time.perf_counter() - t0
+    records, rejections = [], []
+    for c, fabric in enumerate(fabrics):
+        accepted: list[int] = []
+        reason = None
+        for k, state in enumerate(states):
+            if not infos[k].get("settled"):
+                reason = ("unsettled", f"target {k}: mean speed {infos[k].get('final_speed')} m/s")
+                break
+            try:
+                check_result(state[c], garment.faces, rest, targets[k].vertices, body.faces, pinned=garment.pinned)
+            except SimulationRejected as exc:
+                reason = (exc.reason, f"target {k}: {exc.detail}")
+                break
+            accepted.append(k)
+        if len(states) < len(infos) and reason is None:  # the chain stopped at an exploding segment
+            reason = (infos[-1]["aborted"], f"target {len(states)}: simulation aborted")
+        seq_id = job.copy_id(fabric.name)
+        if reason is not None:
+            rejections.append({"id": seq_id, "job": job.job_id, "reason": reason[0], "detail": reason[1],
+                               "accepted": len(accepted)})
+        if not accepted:
+            continue
+        gt = np.stack([states[k][c] for k in accepted]).astype(np.float32)
+        full = GarmentLevel(template, garment.faces, garment.pinned, np.stack([priors[k] for k in accepted]), gt)
+        low = GarmentLevel(
+            template=low_garment.vertices, faces=low_garment.faces, pinned=low_garment.pinned,
+            priors=np.stack([low_priors[k] for k in accepted]),
+            targets=np.stack([transfer_barycentric(t, mapping) for t in gt]).astype(np.float32),
+        )
+        meta = {
+            "index": job.index, "seed": config.seed, "job": job.job_id, "family": job.family,
+            "construction": job.construction, "garment_params": job.garment_params, "phenotype": job.phenotype,
+            "canonical_arm": job.canonical_arm, "canonical_pose": canonical_pose_name(job.canonical_arm),
+            "paired": job.paired, "fabric_name": fabric.name, "fabric_values": fabric.values(),
+            "settled": [True] * len(accepted), "dynamic": [False] * len(accepted),
+            "final_speed": [infos[k]["final_speed"][c] for k in accepted],
+            "pose_modes": [job.pose_modes[k] for k in accepted],
+            "target_poses": [{b: np.asarray(v, dtype=float).round(6).tolist() for b, v in poses[k].items()}
+                             for k in accepted],
+            "settle": {k: settle_info[k] for k in ("frames", "final_speed", "settled", "seconds")},
+            "targets": [{k: v for k, v in infos[t].items() if k != "final_speed"} for t in accepted],
+            "seconds": seconds / len(fabrics),
+            "cpu_seconds": (time.process_time() - c0) / len(fabrics),
+        }
+        records.append(SequenceRecord(
+            seq_id=seq_id, split=job.split, garment_type=job.family,
+            fabric=fabric.name if fabric.name != "custom" else nearest_preset(fabric),
+            body_canonical=canonical.vertices, body_targets=np.stack([targets[k].vertices for k in accepted]),
+            body_faces=body.faces, frames=np.asarray(accepted, dtype=np.int64),
+            levels={"full": full, "low": low}, meta=meta,
+        ))
+    return records, rejections
 
-    low_garment, mapping = decimate(
-        Garment(template, garment.faces, garment.pinned, garment.kind, garment.params), ratio=config.low_ratio
-    )
-    w_low = transfer_weights(low_garment.vertices, canonical.vertices, body_w, k=4)
-    low = GarmentLevel(
-        template=low_garment.vertices,
-        faces=low_garment.faces,
-        pinned=low_garment.pinned,
-        priors=np.stack(
-            [lbs_prior(low_garment.vertices, w_low, canonical.transforms, transforms[b]) for b in body_idx]
-        ),
-        targets=np.stack([transfer_barycentric(t, mapping) for t in targets]).astype(np.float32),
-    )
-    meta = {
-        "index": job.index,
-        "seed": config.seed,
-        "garment_params": job.garment_params,
-        "phenotype": job.phenotype,
-        "target_pose": {k: np.asarray(v, dtype=float).round(6).tolist() for k, v in target_pose.items()},
-        "settle": {k: settle_info[k] for k in ("frames", "final_speed", "settled", "seconds")},
-        "motion": {k: motion_info[k] for k in ("motion_frames", "hold_frames", "final_speed", "settled", "seconds")},
-        "seconds": time.perf_counter() - t0,
-    }
-    return SequenceRecord(
-        seq_id=job.seq_id,
-        split=job.split,
-        garment_type=job.garment_type,
-        fabric=job.fabric,
-        body_canonical=canonical.vertices,
-        body_targets=body_frames[body_idx],
-        body_faces=body.faces,
-        frames=keep,
-        levels={"full": full, "low": low},
-        meta=meta,
-    )
+
+def canonical_pose_name(arm: float) -> str:
+    """``tpose``, ``apose`` or ``between`` for a canonical arm raise in degrees."""
+    return "tpose" if arm == T_POSE_ARM else "apose" if arm == 0.0 else "between"
 
 
 def _run_one(args: tuple[JobSpec, GenerateConfig]) -> dict[str, Any]:
-    """Worker: simulate and write one sequence; returns a manifest or rejection entry."""
+    """Worker: simulate one job and write its records; returns manifest / rejection entries, or an error."""
     from garsim.physics.newton_sim import SimulationRejected
 
     job, config = args
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), time.process_time()
     try:
-        rec = simulate_job(job, config)
-        entry = DatasetStore(config.out).write_sequence(rec)
-        entry["seconds"] = round(time.perf_counter() - t0, 2)
-        return {"ok": True, "entry": entry}
+        records, rejections = simulate_job(job, config)
+        store = DatasetStore(config.out)
+        entries = []
+        for rec in records:
+            entry = store.write_sequence(rec)
+            entry.update(job=job.job_id, construction=job.construction, paired=job.paired,
+                         canonical_pose=rec.meta["canonical_pose"], fabric_name=rec.meta["fabric_name"],
+                         cpu_seconds=round(rec.meta["cpu_seconds"], 2), seconds=round(rec.meta["seconds"], 2),
+                         num_settled=int(sum(rec.meta["settled"])), phenotype=job.phenotype)
+            entries.append(entry)
     except SimulationRejected as exc:
-        reason, detail = exc.reason, exc.detail
-    except Exception as exc:  # a crash in one job must not kill the run; it is logged as rejected
-        reason, detail = "error", f"{type(exc).__name__}: {exc}\n{traceback.format_exc(limit=3)}"
-    return {"ok": False, "entry": {"id": job.seq_id, "reason": reason, "detail": detail,
-                                   "seconds": round(time.perf_counter() - t0, 2)}}
+        records, entries = [], []
+        rejections = [{"id": job.copy_id(f["name"]), "job": job.job_id, "reason": exc.reason, "detail": exc.detail,
+                       "accepted": 0} for f in job.fabrics]
+    except Exception as exc:  # transient or a bug: not a permanent rejection, retried on the next run
+        return {"error": {"job": job.job_id, "error": f"{type(exc).__name__}: {exc}",
+                          "traceback": traceback.format_exc(limit=5)}}
+    cpu = (time.process_time() - c0) / max(len(job.fabrics), 1)
+    for r in rejections:
+        r.update(family=job.family, construction=job.construction, split=job.split, cpu_seconds=round(cpu, 2),
+                 seconds=round((time.perf_counter() - t0) / len(job.fabrics), 2))
+    return {"entries": entries, "rejections": rejections}
+
+
+def check_settings(config: GenerateConfig) -> None:
+    """Bind the dataset folder to these settings, or refuse a rerun whose settings differ."""
+    path = config.out / CONFIG_FILE
+    mine = config.settings()
+    if path.exists():
+        try:
+            theirs = json.loads(path.read_text(encoding="utf-8"))
+        except json.JSONDecodeError as exc:
+            raise ValueError(f"{path} is corrupt ({exc}); remove it only if the folder holds no samples") from None
+        for key in sorted(set(mine) | set(theirs)):
+            if mine.get(key) != theirs.get(key):
+                raise ValueError(f"{config.out} was generated with {key}={theirs.get(key)!r}, this run has "
+                                 f"{key}={mine.get(key)!r}: use the same setting or another --out folder")
+        return
+    if (config.out / "manifest.jsonl").exists():
+        raise ValueError(f"{config.out} holds a dataset without {CONFIG_FILE} (an older format): use another --out folder")
+    atomic_write_bytes(path, json.dumps(mine, indent=2, sort_keys=True).encode())
 
 
 def generate(config: GenerateConfig, progress: bool = True) -> dict[str, Any]:
     """Run (or resume) generation; returns counts, rejection reasons and timings of this run."""
     from tqdm import tqdm
 
-    store = DatasetStore(config.out)
     config.out.mkdir(parents=True, exist_ok=True)
+    check_settings(config)
+    store = DatasetStore(config.out)
     jobs = plan_jobs(config)
     k, n = config.shard
-    done = store.done_ids()
-    pending = [j for j in jobs if j.index % n == k and j.seq_id not in done]
+    done = {e.get("job", e["id"]) for e in store.entries()} | {e.get("job", e["id"]) for e in store.entries(REJECTED)}
+    pending = [j for j in jobs if j.index % n == k and j.job_id not in done]
     # interleave the splits so that a partial run (or a stopped one) holds every split in proportion
-    rank = {j.seq_id: r for split in SPLIT_TYPES for r, j in enumerate(x for x in jobs if x.split == split)}
+    rank = {j.job_id: r for split in SPLITS for r, j in enumerate(x for x in jobs if x.split == split)}
     size = Counter(j.split for j in jobs)
-    pending.sort(key=lambda j: (rank[j.seq_id] / size[j.split], j.index))
+    pending.sort(key=lambda j: (rank[j.job_id] / size[j.split], j.index))
     if config.limit is not None:
         pending = pending[: config.limit]
     summary: dict[str, Any] = {"planned": len(jobs), "pending": len(pending), "stored": 0, "rejected": {},
-                               "seconds": []}
+                               "errors": 0, "seconds": []}
     if not pending:
         return summary
-    ctx = mp.get_context("spawn")
     work = [(j, config) for j in pending]
     t0 = time.perf_counter()
-    pool_cm = (
-        _single_threaded_pool(ctx, config.workers) if config.workers > 1 else _InlinePool()
-    )
+    pool_cm = _worker_pool(config.workers) if config.workers > 1 else _InlinePool()
     with pool_cm as pool:
-        bar = tqdm(pool.imap_unordered(_run_one, work), total=len(work), disable=not progress, unit="seq")
+        bar = tqdm(pool.imap_unordered(_run_one, work), total=len(work), disable=not progress, unit="job")
         for result in bar:
-            entry = result["entry"]
-            summary["seconds"].append(entry["seconds"])
-            if result["ok"]:
+            if "error" in result:
+                summary["errors"] += 1
+                store.append_manifest(result["error"], ERRORS)
+                log.error("job %s failed (retried on the next run): %s", result["error"]["job"], result["error"]["error"])
+                continue
+            for entry in result["entries"]:
                 store.append_manifest(entry)
                 summary["stored"] += 1
-            else:
-                store.append_manifest(entry, REJECTED)
-                summary["rejected"][entry["reason"]] = summary["rejected"].get(entry["reason"], 0) + 1
-                log.warning("rejected %s: %s", entry["id"], entry["detail"].splitlines()[0])
+                summary["seconds"].append(entry["seconds"])
+            for rej in result["rejections"]:
+                if rej["accepted"] == 0:  # a copy with some accepted states is stored; its rest is only logged
+                    store.append_manifest(rej, REJECTED)
+                summary["rejected"][rej["reason"]] = summary["rejected"].get(rej["reason"], 0) + 1
+                log.info("rejected %s: %s", rej["id"], rej["detail"].splitlines()[0])
             bar.set_postfix(stored=summary["stored"], rejected=sum(summary["rejected"].values()))
     summary["wall_seconds"] = time.perf_counter() - t0
     return summary
 
 
 _THREAD_VARS = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")
+_PR_SET_PDEATHSIG = 1
 
 
-def _one_thread() -> None:
-    """Worker initializer: one torch/BLAS thread per worker (workers share the cores)."""
+def _worker_init(parent: int) -> None:
+    """Worker initializer: die with the parent (Linux PR_SET_PDEATHSIG, set first), one torch/BLAS thread."""
+    with contextlib.suppress(OSError, AttributeError):
+        ctypes.CDLL("libc.so.6", use_errno=True).prctl(_PR_SET_PDEATHSIG, int(signal.SIGKILL))
+    if os.getppid() != parent:  # the parent died before the signal was armed
+        os._exit(1)
     import torch
 
     torch.set_num_threads(1)
 
 
 @contextlib.contextmanager
-def _single_threaded_pool(ctx: Any, workers: int) -> Iterator[Any]:
-    """A process pool whose workers each use one thread (N workers x N threads thrash N cores).
+def _worker_pool(workers: int) -> Iterator[Any]:
+    """A spawn process pool whose workers use one thread each and are killed if the parent dies.
 
     The thread variables stay set while the pool lives, so workers it respawns inherit them too.
     """
     saved = {k: os.environ.get(k) for k in _THREAD_VARS}
     os.environ.update({k: "1" for k in _THREAD_VARS})
     try:
-        with ctx.Pool(workers, initializer=_one_thread, maxtasksperchild=20) as pool:
+        with mp.get_context("spawn").Pool(workers, initializer=_worker_init, initargs=(os.getpid(),),
+                                              maxtasksperchild=10) as pool:
             yield pool
     finally:
         for k, v in saved.items():
@@ -327,7 +511,7 @@ def _single_threaded_pool(ctx: Any, workers: int) -> Iterator[Any]:
 class _InlinePool:
     """A one-process stand-in for ``multiprocessing.Pool`` (workers=1: easier debugging)."""
 
-    def __enter__(self) -> "_InlinePool":
+    def __enter__(self) -> _InlinePool:
         return self
 
     def __exit__(self, *exc: object) -> None:
@@ -336,9 +520,3 @@ class _InlinePool:
     @staticmethod
     def imap_unordered(fn, items):  # type: ignore[no-untyped-def]
         return map(fn, items)
-
-
-def config_dict(config: GenerateConfig) -> dict[str, Any]:
-    d = asdict(config)
-    d["out"] = str(config.out)
-    return d

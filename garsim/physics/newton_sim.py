@@ -2,10 +2,11 @@
 
 ``settle`` drapes a template garment on the canonical body under gravity (pinned vertices held)
 until the garment's mean speed falls below a threshold; this gives the paper's template G.
-``simulate_motion`` moves the body canonical -> target over the given frames (the body's collision
-mesh is re-fitted every substep, body positions interpolated between frames), drives the pinned
-vertices along their LBS-prior targets, then holds the target pose and settles again.
-``check_result`` rejects exploded or penetrating results with a named reason.
+``simulate_poses`` moves the body through a chain of target poses (the body's collision mesh is
+re-fitted every substep, body positions interpolated between frames), drives the pinned vertices
+along their LBS-prior targets, and at each target holds the pose until the cloth settles; several
+fabric copies of one template run in one model (paired-fabric groups).
+``check_result`` raises ``SimulationRejected`` for exploded or penetrating results, with a named reason.
 
 Only ``garsim.physics`` imports Newton (an optional extra); inference code never does.
 """
@@ -15,11 +16,12 @@ from __future__ import annotations
 import logging
 import time
 from dataclasses import asdict, dataclass
+from collections.abc import Callable, Sequence
 from typing import Any
 
 import numpy as np
 
-from garsim.garments.fabrics import Fabric, get_fabric
+from garsim.garments.fabrics import Fabric, edge_bending_stiffness, get_fabric
 from garsim.garments.garment import Garment
 from garsim.geometry.mesh import face_normals, face_pairs, unique_edges
 from garsim.geometry.proximity import nearest_vertices
@@ -46,19 +48,19 @@ class SimConfig:
 
     fps: float = 30.0  # stored frames per simulated second
     substeps: int = 5  # VBD steps per frame
-    iterations: int = 5  # VBD iterations per step
+    iterations: int = 15  # VBD iterations per step (5 left sleeves and crotches stretched 1.6-2.2x: VBD unconverged)
     damping: float = 0.95  # velocity factor applied after every substep (drag; the rest shape is unchanged)
-    settle_speed: float = 0.03  # m/s: settled when the mean free-vertex speed stays below this
+    settle_speed: float = 0.02  # m/s: settled when the mean free-vertex speed stays below this
     settle_patience: int = 3  # consecutive frames below the threshold
-    min_settle_frames: int = 10
-    max_settle_frames: int = 150
-    max_hold_frames: int = 90  # settling cap after the motion, at the target pose
+    min_settle_frames: int = 8
+    max_settle_frames: int = 120
+    max_hold_frames: int = 60  # settling cap after each motion, at the target pose
     gravity: float = -9.81
     soft_contact_gap: float = 0.01  # m: contact detection gap of the collision pipeline
     contact_ke: float = 1.0e4  # body-cloth contact stiffness (N/m)
     contact_kd: float = 1.0e-2  # body-cloth contact damping
     flat_rest_angles: bool = True  # fabric cut flat: zero rest dihedral angles
-    crop_margin: float | None = 0.15  # m: collide only with body faces this close to the garment's box
+    crop_margin: float | None = 0.06  # m: collide only with body faces this close to the garment's box (at any frame)
     abort_stretch: float = 3.0  # stop early when any edge exceeds this multiple of its rest length
 
     def __post_init__(self) -> None:
@@ -117,8 +119,16 @@ def crop_body(
     return used, remap[body_faces[keep_face]]
 
 
-class _ClothScene:
-    """One Newton model: the garment as VBD cloth, the body as a static, re-fittable triangle mesh."""
+class ClothScene:
+    """One Newton model: C copies of one garment (one per fabric) as VBD cloth, the body as a static,
+    re-fittable triangle mesh.
+
+    The copies occupy the same space but never touch (particle self-contact is off in VBD cloth
+    here), so a paired-fabric group (one template, four fabrics, one body motion) is one launch.
+    Each copy's hinges get their own stiffness from its fabric's bending rigidity
+    (:func:`edge_bending_stiffness`), each particle its own mass from the fabric's areal density.
+    Friction is one value per model (Newton's soft contact): the copies' mean.
+    """
 
     def __init__(
         self,
@@ -127,57 +137,76 @@ class _ClothScene:
         pinned: np.ndarray,
         body_vertices: np.ndarray,
         body_faces: np.ndarray,
-        fabric: Fabric,
+        fabrics: "Sequence[str | Fabric]",
         config: SimConfig,
     ) -> None:
         import newton
         import warp as wp
 
-        self.wp = wp
         self.config = config
+        fabrics = [get_fabric(f) for f in fabrics]
+        if not fabrics:
+            raise ValueError("at least one fabric is needed")
         gv, gf = _check_mesh("garment", garment_vertices, garment_faces)
         bv, bf = _check_mesh("body", body_vertices, body_faces)
         pinned = np.asarray(pinned, dtype=bool)
         if pinned.shape != (len(gv),):
             raise ValueError(f"pinned mask has shape {pinned.shape}, expected ({len(gv)},)")
+        n = len(gv)
+        self.copies = len(fabrics)
+        self.num_particles = n
         self.pinned_idx = np.flatnonzero(pinned)
+        self.all_pinned = (self.pinned_idx[None] + n * np.arange(self.copies)[:, None]).ravel()
         self.free = ~pinned
         if not self.free.any():
             raise ValueError("every garment vertex is pinned: nothing to simulate")
+        friction = float(np.mean([f.friction for f in fabrics]))
 
         builder = newton.ModelBuilder(up_axis=newton.Axis.Z, gravity=(0.0, 0.0, config.gravity))
         shape_cfg = builder.default_shape_cfg.copy()
         shape_cfg.ke = config.contact_ke
         shape_cfg.kd = config.contact_kd
-        shape_cfg.mu = fabric.friction
+        shape_cfg.mu = friction
         self.body_mesh = newton.Mesh(bv, bf.ravel(), compute_inertia=False, is_solid=True)
         builder.add_shape_mesh(body=-1, mesh=self.body_mesh, cfg=shape_cfg)
-        builder.add_cloth_mesh(
-            pos=wp.vec3(0.0, 0.0, 0.0),
-            rot=wp.quat_identity(),
-            scale=1.0,
-            vel=wp.vec3(0.0, 0.0, 0.0),
-            vertices=gv,
-            indices=gf.ravel(),
-            density=fabric.density,
-            tri_ke=fabric.tri_ke,
-            tri_ka=fabric.tri_ka,
-            tri_kd=fabric.tri_kd,
-            edge_ke=fabric.edge_ke,
-            edge_kd=fabric.edge_kd,
-            particle_radius=fabric.thickness,
-        )
+        edge_ranges = []
+        for fabric in fabrics:
+            start = builder.edge_count
+            builder.add_cloth_mesh(
+                pos=wp.vec3(0.0, 0.0, 0.0),
+                rot=wp.quat_identity(),
+                scale=1.0,
+                vel=wp.vec3(0.0, 0.0, 0.0),
+                vertices=gv,
+                indices=gf.ravel(),
+                density=fabric.density,
+                tri_ke=fabric.stretch,
+                tri_ka=fabric.stretch,
+                tri_kd=fabric.stretch_damping,
+                edge_ke=1.0,  # replaced per hinge below
+                edge_kd=0.0,
+                particle_radius=fabric.thickness,
+            )
+            edge_ranges.append((start, builder.edge_count))
         builder.color(include_bending=True)
         model = builder.finalize(device="cpu")
         if config.flat_rest_angles:
             model.edge_rest_angle.zero_()
+        hinges = model.edge_indices.numpy()
+        rest_q = model.particle_q.numpy()
+        props = model.edge_bending_properties.numpy()
+        for fabric, (a, b) in zip(fabrics, edge_ranges):
+            ke = edge_bending_stiffness(fabric.bending, rest_q, hinges[a:b])
+            props[a:b, 0] = ke
+            props[a:b, 1] = ke * fabric.bending_damping
+        model.edge_bending_properties.assign(props.astype(np.float32))
         flags = model.particle_flags.numpy()
         clear = ~np.array(int(newton.ParticleFlags.ACTIVE), dtype=flags.dtype)
-        flags[self.pinned_idx] &= clear
+        flags[self.all_pinned] &= clear
         model.particle_flags.assign(flags)
         model.soft_contact_ke = config.contact_ke
         model.soft_contact_kd = config.contact_kd
-        model.soft_contact_mu = fabric.friction
+        model.soft_contact_mu = friction
         self.model = model
         self.pipeline = newton.CollisionPipeline(
             model, soft_contact_gap=config.soft_contact_gap, enable_rigid_soft_full_surface_contact=True
@@ -188,22 +217,23 @@ class _ClothScene:
         self.state_1 = model.state()
         self.control = model.control()
         self.body_points = self.body_mesh.mesh.points
-        self.num_particles = len(gv)
 
     # -- state access (CPU arrays: numpy views share memory with warp) ------------------------
     def positions(self) -> np.ndarray:
-        return self.state_0.particle_q.numpy().copy()
+        """(C, N, 3) positions of every copy."""
+        return self.state_0.particle_q.numpy().reshape(self.copies, self.num_particles, 3).copy()
 
     def set_body(self, vertices: np.ndarray) -> None:
         self.body_points.assign(np.ascontiguousarray(vertices, dtype=np.float32))
         self.body_mesh.mesh.refit()
 
     def set_pins(self, targets: np.ndarray) -> None:
+        """Put the pinned vertices of every copy on ``targets`` (Np, 3), at rest."""
         if len(self.pinned_idx):
             q = self.state_0.particle_q.numpy()
-            q[self.pinned_idx] = targets
+            q[self.all_pinned] = np.tile(targets, (self.copies, 1))
             qd = self.state_0.particle_qd.numpy()
-            qd[self.pinned_idx] = 0.0
+            qd[self.all_pinned] = 0.0
             self.state_0.particle_q.assign(q)
             self.state_0.particle_qd.assign(qd)
 
@@ -218,9 +248,15 @@ class _ClothScene:
             qd *= cfg.damping
             self.state_0.particle_qd.assign(qd)
 
+    def frame(self) -> np.ndarray:
+        """Step one frame (``substeps`` substeps) and return (C, N, 3) positions."""
+        for _ in range(self.config.substeps):
+            self.substep()
+        return self.positions()
+
 
 def _abort_reason(cur: np.ndarray, edges: np.ndarray, rest: np.ndarray, config: SimConfig) -> str | None:
-    """Why a running simulation must stop now (non-finite or exploding), or None."""
+    """Why a running simulation must stop now (non-finite or exploding), or None. ``cur`` is (..., N, 3)."""
     if not np.isfinite(cur).all():
         return REJECT_NON_FINITE
     if _edge_stretch(cur, edges, rest) > config.abort_stretch:
@@ -229,37 +265,42 @@ def _abort_reason(cur: np.ndarray, edges: np.ndarray, rest: np.ndarray, config: 
 
 
 def _edge_stretch(vertices: np.ndarray, edges: np.ndarray, rest: np.ndarray) -> float:
-    length = np.linalg.norm(vertices[edges[:, 1]] - vertices[edges[:, 0]], axis=1)
+    length = np.linalg.norm(vertices[..., edges[:, 1], :] - vertices[..., edges[:, 0], :], axis=-1)
     return float(np.max(length / np.maximum(rest, 1e-12)))
 
 
+def mean_speed(prev: np.ndarray, cur: np.ndarray, free: np.ndarray, frame_dt: float) -> np.ndarray:
+    """Mean speed (m/s) of the free vertices between two frames, per copy: (C, N, 3) -> (C,)."""
+    return np.linalg.norm(cur[..., free, :] - prev[..., free, :], axis=-1).mean(axis=-1) / frame_dt
+
+
 def _settle_loop(
-    scene: _ClothScene, max_frames: int, config: SimConfig, edges: np.ndarray, rest: np.ndarray
-) -> tuple[list[np.ndarray], dict[str, Any]]:
-    """Step whole frames until the mean free-vertex speed stays below the threshold (or the cap)."""
-    frames: list[np.ndarray] = []
+    scene: ClothScene, max_frames: int, config: SimConfig, edges: np.ndarray, rest: np.ndarray
+) -> tuple[np.ndarray, dict[str, Any]]:
+    """Step whole frames until every copy's mean free-vertex speed stays below the threshold (or the cap).
+
+    Returns the last (C, N, 3) positions and an info dict (frames, final speed per copy, settled, aborted).
+    """
     prev = scene.positions()
+    cur = prev
     calm = 0
-    speed = float("nan")
-    speeds: list[float] = []
+    speed = np.full(scene.copies, np.nan)
     aborted = None
+    frames = 0
     for _ in range(max_frames):
-        for _ in range(config.substeps):
-            scene.substep()
-        cur = scene.positions()
-        frames.append(cur)
+        cur = scene.frame()
+        frames += 1
         aborted = _abort_reason(cur, edges, rest, config)
         if aborted:
             break
-        speed = float(np.linalg.norm(cur[scene.free] - prev[scene.free], axis=1).mean() / config.frame_dt)
-        speeds.append(speed)
+        speed = mean_speed(prev, cur, scene.free, config.frame_dt)
         prev = cur
-        calm = calm + 1 if speed < config.settle_speed else 0
-        if calm >= config.settle_patience and len(frames) >= config.min_settle_frames:
+        calm = calm + 1 if float(speed.max()) < config.settle_speed else 0
+        if calm >= config.settle_patience and frames >= config.min_settle_frames:
             break
     settled = aborted is None and calm >= config.settle_patience
-    return frames, {"frames": len(frames), "final_speed": speed, "settled": settled, "aborted": aborted,
-                    "speeds": speeds}
+    return cur, {"frames": frames, "final_speed": [round(float(x), 5) for x in speed], "settled": settled,
+                 "aborted": aborted}
 
 
 def settle(
@@ -280,105 +321,106 @@ def settle(
     body_vertices = np.asarray(body_vertices, dtype=np.float32)
     box = np.stack([garment.vertices.min(0), garment.vertices.max(0)])[None]
     used, faces_c = crop_body(body_vertices[None], body_faces, box, config.crop_margin)
-    scene = _ClothScene(garment.vertices, garment.faces, garment.pinned, body_vertices[used], faces_c, fabric, config)
+    scene = ClothScene(garment.vertices, garment.faces, garment.pinned, body_vertices[used], faces_c, [fabric], config)
     edges = unique_edges(garment.faces)
     rest = np.linalg.norm(garment.vertices[edges[:, 1]] - garment.vertices[edges[:, 0]], axis=1)
     t1 = time.perf_counter()
-    frames, info = _settle_loop(scene, config.max_settle_frames, config, edges, rest)
+    final, info = _settle_loop(scene, config.max_settle_frames, config, edges, rest)
     t2 = time.perf_counter()
     info.update(
         fabric=fabric.name,
         build_seconds=t1 - t0,
         seconds=t2 - t0,
-        seconds_per_frame=(t2 - t1) / max(len(frames), 1),
+        seconds_per_frame=(t2 - t1) / max(info["frames"], 1),
         num_vertices=garment.num_vertices,
         config=asdict(config),
     )
     if not info["settled"]:
-        log.info("settle: %s stopped after %d frames at mean speed %.4f m/s (aborted=%s)",
+        log.info("settle: %s stopped after %d frames at mean speed %s m/s (aborted=%s)",
                  fabric.name, info["frames"], info["final_speed"], info["aborted"])
-    return frames[-1].astype(np.float32), info
+    return final[0].astype(np.float32), info
 
 
-def simulate_motion(
-    garment_vertices: np.ndarray,
+def simulate_poses(
+    template: np.ndarray,
     garment_faces: np.ndarray,
     pinned: np.ndarray,
-    body_frames: np.ndarray,
+    body_segments: "Sequence[np.ndarray]",
     body_faces: np.ndarray,
-    pinned_targets: np.ndarray,
-    fabric: "str | Fabric",
+    pin_segments: "Sequence[np.ndarray]",
+    fabrics: "Sequence[str | Fabric]",
     config: SimConfig | None = None,
-) -> tuple[np.ndarray, dict[str, Any]]:
-    """Move the body through ``body_frames`` (T, Vb, 3; frame 0 = the pose the garment is settled on),
-    with the pinned vertices on ``pinned_targets`` (T, Np, 3), then hold the last pose and settle.
+    on_state: "Callable[[int, np.ndarray, dict[str, Any]], None] | None" = None,
+) -> tuple[list[np.ndarray], list[dict[str, Any]]]:
+    """Move the body through a chain of target poses and settle at each; every fabric copy at once.
 
-    Returns frames (T', N, 3) float32 (frame 0 = the input garment; frames 1..T-1 the motion; the
-    rest the hold at the target pose until the speed threshold or ``max_hold_frames``) and an info
-    dict (``motion_frames`` = T, ``hold_frames``, ``final_speed``, ``settled``, timings, ``aborted``).
+    ``body_segments[k]`` (T_k, Vb, 3) moves the body from the previous pose (frame 0 = the pose the
+    garment rests on) to target k, ``pin_segments[k]`` (T_k, Np, 3) the pinned vertices with it.
+    After each segment the body holds still until every copy's mean speed is below
+    ``config.settle_speed`` (or ``max_hold_frames``). Returns the settled states, one (C, N, 3)
+    array per target reached, and one info dict per target (motion and hold frames, final speed,
+    settled, seconds, aborted). A segment that explodes ends the chain: its info has ``aborted``
+    and no state. ``on_state(k, state, info)`` is called as each state settles.
     """
     config = config or SimConfig()
-    fabric = get_fabric(fabric)
-    body_frames = np.asarray(body_frames, dtype=np.float32)
+    fabrics = [get_fabric(f) for f in fabrics]
     pinned = np.asarray(pinned, dtype=bool)
-    pinned_targets = np.asarray(pinned_targets, dtype=np.float32)
-    if body_frames.ndim != 3 or body_frames.shape[2] != 3 or len(body_frames) < 2:
-        raise ValueError(f"body_frames must be (T >= 2, Vb, 3), got {body_frames.shape}")
     n_pin = int(pinned.sum())
-    if pinned_targets.shape != (len(body_frames), n_pin, 3):
-        raise ValueError(f"pinned_targets must be (T={len(body_frames)}, Np={n_pin}, 3), got {pinned_targets.shape}")
-    if not (np.isfinite(body_frames).all() and np.isfinite(pinned_targets).all()):
-        raise ValueError("body_frames / pinned_targets contain NaN/inf")
+    if len(body_segments) != len(pin_segments) or not body_segments:
+        raise ValueError(f"need one pin segment per body segment (>= 1), got {len(body_segments)} and {len(pin_segments)}")
+    segs = [np.asarray(b, dtype=np.float32) for b in body_segments]
+    pins = [np.asarray(p, dtype=np.float32) for p in pin_segments]
+    for b, p in zip(segs, pins):
+        if b.ndim != 3 or b.shape[2] != 3 or len(b) < 2:
+            raise ValueError(f"each body segment must be (T >= 2, Vb, 3), got {b.shape}")
+        if p.shape != (len(b), n_pin, 3):
+            raise ValueError(f"pin segment must be (T={len(b)}, Np={n_pin}, 3), got {p.shape}")
+        if not (np.isfinite(b).all() and np.isfinite(p).all()):
+            raise ValueError("body / pin segments contain NaN/inf")
     t0 = time.perf_counter()
-    gv = np.asarray(garment_vertices, dtype=np.float32)
-    # garment box at every frame: the input garment's box carried along by the pinned targets' mean motion
-    shift = pinned_targets.mean(axis=1) - pinned_targets[:1].mean(axis=1) if n_pin else np.zeros((len(body_frames), 3))
+    gv = np.asarray(template, dtype=np.float32)
+    all_body = np.concatenate(segs)
+    all_pins = np.concatenate(pins)
+    # the garment's box at every frame: the template's box carried along by the pinned vertices' mean motion
+    shift = all_pins.mean(axis=1) - all_pins[:1].mean(axis=1) if n_pin else np.zeros((len(all_body), 3))
     boxes = np.stack([gv.min(0) + shift, gv.max(0) + shift], axis=1)
-    used, faces_c = crop_body(body_frames, body_faces, boxes, config.crop_margin)
-    body_frames = np.ascontiguousarray(body_frames[:, used])
-    scene = _ClothScene(gv, garment_faces, pinned, body_frames[0], faces_c, fabric, config)
+    used, faces_c = crop_body(all_body, body_faces, boxes, config.crop_margin)
+    scene = ClothScene(gv, garment_faces, pinned, segs[0][0, used], faces_c, fabrics, config)
     edges = unique_edges(garment_faces)
     rest = np.linalg.norm(gv[edges[:, 1]] - gv[edges[:, 0]], axis=1)
-    t1 = time.perf_counter()
-    frames = [gv.copy()]
-    aborted = None
     s = config.substeps
     weights = (np.arange(1, s + 1, dtype=np.float32) / s)[:, None, None]
-    for k in range(1, len(body_frames)):
-        bodies = (1.0 - weights) * body_frames[k - 1] + weights * body_frames[k]
-        pins = (1.0 - weights) * pinned_targets[k - 1] + weights * pinned_targets[k]
-        for j in range(s):
-            scene.set_body(bodies[j])
-            scene.set_pins(pins[j])
-            scene.substep()
-        cur = scene.positions()
-        frames.append(cur)
-        aborted = _abort_reason(cur, edges, rest, config)
-        if aborted:
+    states: list[np.ndarray] = []
+    infos: list[dict[str, Any]] = []
+    for k, (body, pin) in enumerate(zip(segs, pins)):
+        t1 = time.perf_counter()
+        body = np.ascontiguousarray(body[:, used])
+        aborted = None
+        for j in range(1, len(body)):
+            bodies = (1.0 - weights) * body[j - 1] + weights * body[j]
+            ptarget = (1.0 - weights) * pin[j - 1] + weights * pin[j]
+            for i in range(s):
+                scene.set_body(bodies[i])
+                scene.set_pins(ptarget[i])
+                scene.substep()
+            aborted = _abort_reason(scene.positions(), edges, rest, config)
+            if aborted:
+                break
+        info: dict[str, Any] = {"target": k, "motion_frames": len(body) - 1, "aborted": aborted}
+        if aborted is None:
+            state, hold = _settle_loop(scene, config.max_hold_frames, config, edges, rest)
+            info.update(hold_frames=hold["frames"], final_speed=hold["final_speed"], settled=hold["settled"],
+                        aborted=hold["aborted"])
+        info["seconds"] = time.perf_counter() - t1
+        infos.append(info)
+        if info["aborted"]:
+            log.info("simulate_poses: target %d aborted (%s)", k, info["aborted"])
             break
-    t2 = time.perf_counter()
-    hold_info: dict[str, Any] = {"frames": 0, "final_speed": float("nan"), "settled": False, "aborted": aborted}
-    if aborted is None:
-        hold, hold_info = _settle_loop(scene, config.max_hold_frames, config, edges, rest)
-        frames.extend(hold)
-    t3 = time.perf_counter()
-    out = np.stack(frames).astype(np.float32)
-    info = {
-        "fabric": fabric.name,
-        "motion_frames": len(body_frames),
-        "hold_frames": hold_info["frames"],
-        "final_speed": hold_info["final_speed"],
-        "settled": hold_info["settled"],
-        "aborted": hold_info["aborted"],
-        "build_seconds": t1 - t0,
-        "seconds": t3 - t0,
-        "seconds_per_frame": (t3 - t1) / max(len(frames) - 1, 1),
-        "motion_seconds": t2 - t1,
-        "num_vertices": len(gv),
-    }
-    if info["aborted"]:
-        log.warning("simulate_motion aborted (%s) after %d frames", info["aborted"], len(frames))
-    return out, info
+        states.append(state.astype(np.float32))
+        if on_state is not None:
+            on_state(k, states[-1], info)
+    log.debug("simulate_poses: %d targets, %.1f s", len(states), time.perf_counter() - t0)
+    return states, infos
 
 
 def mean_body_distance(vertices: np.ndarray, body_vertices: np.ndarray) -> float:
@@ -426,8 +468,8 @@ def check_result(
     max_stretch: float = 1.5,
     max_inside: float = 0.01,
     pinned: np.ndarray | None = None,
-) -> tuple[bool, str]:
-    """Accept or reject simulated frames (T, N, 3): returns (ok, "" or "<reason>: <detail>").
+) -> None:
+    """Accept simulated frames (T, N, 3) or raise ``SimulationRejected`` with a named reason.
 
     Rejects non-finite values, any edge longer than ``max_stretch`` x its rest length (edges in
     ``unique_edges(garment_faces)`` order), or more than ``max_inside`` of the garment vertices
@@ -446,14 +488,13 @@ def check_result(
     if body.ndim == 3 and len(body) != len(frames):
         raise ValueError(f"body_vertices has {len(body)} frames, garment has {len(frames)}")
 
-    def reject(reason: str, detail: str) -> tuple[bool, str]:
-        msg = f"{reason}: {detail}"
-        log.warning("simulation rejected: %s", msg)
-        return False, msg
+    def reject(reason: str, detail: str) -> None:
+        log.warning("simulation rejected: %s: %s", reason, detail)
+        raise SimulationRejected(reason, detail)
 
     finite = np.isfinite(frames).all(axis=(1, 2))
     if not finite.all():
-        return reject(REJECT_NON_FINITE, f"NaN/inf at frame {int(np.argmin(finite))}")
+        reject(REJECT_NON_FINITE, f"NaN/inf at frame {int(np.argmin(finite))}")
     d = frames[:, edges[:, 1]] - frames[:, edges[:, 0]]
     ratio = np.linalg.norm(d, axis=2) / np.maximum(rest, 1e-12)[None]
     if pinned is not None:
@@ -462,8 +503,7 @@ def check_result(
     worst = float(ratio.max())
     if worst > max_stretch:
         t, e = np.unravel_index(int(np.argmax(ratio)), ratio.shape)
-        return reject(REJECT_OVERSTRETCHED,
-                      f"edge {int(e)} at frame {int(t)} stretched {worst:.2f}x rest (limit {max_stretch}x)")
+        reject(REJECT_OVERSTRETCHED, f"edge {int(e)} at frame {int(t)} stretched {worst:.2f}x rest (limit {max_stretch}x)")
     from garsim.geometry.inside import InsideTester
 
     tester = InsideTester(body[0] if body.ndim == 3 else body, body_faces)
@@ -472,15 +512,5 @@ def check_result(
             tester.update(body[t])
         frac = float(np.mean(tester.inside(frames[t])))
         if frac > max_inside:
-            return reject(REJECT_PENETRATION,
-                          f"{100 * frac:.2f}% of garment vertices inside the body at frame {t} "
-                          f"(limit {100 * max_inside:.1f}%)")
-    return True, ""
-
-
-def ensure_ok(ok_reason: tuple[bool, str]) -> None:
-    """Raise ``SimulationRejected`` for a failed ``check_result``."""
-    ok, msg = ok_reason
-    if not ok:
-        reason, _, detail = msg.partition(": ")
-        raise SimulationRejected(reason, detail)
+            reject(REJECT_PENETRATION, f"{100 * frac:.2f}% of garment vertices inside the body at frame {t} "
+                                       f"(limit {100 * max_inside:.1f}%)")
