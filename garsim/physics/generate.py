@@ -50,6 +50,10 @@ TEMPLATE_FAMILIES: tuple[str, ...] = ("skirt", "top", "tshirt", "trousers", "dre
 """Families the parametric templates build (long sleeves come from the implicit construction only)."""
 SLEEVED: frozenset[str] = frozenset({"tshirt", "longsleeve"})
 CONSTRUCTIONS: tuple[str, ...] = ("template", "implicit")
+WAIST_FAMILIES: frozenset[str] = frozenset({"skirt", "trousers"})
+SHOULDER_PIN_BAND = 0.04
+"""m: garments hung from the shoulders keep only the pins this close below their highest pin (pins that run
+down a strap towards the armpit follow the skinned arm and tore the cloth next to them: 1.8x edges)."""
 PHENOTYPE_RANGES: dict[str, tuple[float, float]] = {
     "gender": (0.0, 1.0),
     "age": (0.3, 1.0),
@@ -81,7 +85,7 @@ class GenerateConfig:
     targets_per_job: int = 3  # chained target poses, each settled
     min_vertices: int = 300  # garment resolution, log-uniform in [min, max]
     max_vertices: int = 2500
-    max_paired_vertices: int = 1500  # paired groups simulate four copies: cap their resolution
+    max_paired_vertices: int = 800  # paired groups simulate four copies: cap their resolution
     paired_every: int = 4  # every k-th job is a paired-fabric group (all four presets)
     physical_share: float = 0.5  # share of the other jobs with fabric values sampled between silk and leather
     motion_frames: int = 12  # frames from one pose to the next
@@ -110,9 +114,12 @@ class GenerateConfig:
 
     def settings(self) -> dict[str, Any]:
         """The settings a dataset folder is bound to (counts may grow, the rest must match)."""
+        from garsim.physics.newton_sim import SimConfig
+
         d = asdict(self)
         for key in ("out", "num_train", "num_test", "num_ood", "workers", "shard", "limit"):
             d.pop(key)
+        d["sim"] = asdict(SimConfig(**self.sim))  # the effective simulator settings, defaults included
         return json.loads(json.dumps(d))
 
 
@@ -254,6 +261,8 @@ def build_garment(job: JobSpec, body: Any) -> Any:
         g = make_implicit_garment(job.family, body.canonical().vertices, body.faces, body.skin_indices,
                                   body.skin_weights, body.bone_labels, job.garment_params, target_vertices=job.vertices)
     g.params["construction"] = job.construction
+    if job.family not in WAIST_FAMILIES:  # hung from the shoulders: pin only their tops
+        g.pinned &= g.vertices[:, 2] >= g.vertices[g.pinned, 2].max() - SHOULDER_PIN_BAND
     return g
 
 
