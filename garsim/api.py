@@ -9,9 +9,7 @@ from typing import Any
 
 import numpy as np
 
-from garsim.bodies.anny import match_anny_rig
-from garsim.bodies.prior import rigfree_prior
-from garsim.bodies.recover import recovered_lbs_prior
+from garsim.bodies.prior import mesh_pair_prior
 from garsim.data.sample import FABRICS, Sample
 from garsim.garments.garment import Garment
 from garsim.garments.remesh import BarycentricMap, barycentric_map, decimate, transfer_barycentric
@@ -38,16 +36,6 @@ def _pinned_mask(pinned: Any, n: int) -> np.ndarray:
     mask = np.zeros(n, dtype=bool)
     mask[idx] = True
     return mask
-
-
-def mesh_pair_prior(garment: np.ndarray, canonical: np.ndarray, target: np.ndarray, faces: np.ndarray) -> np.ndarray:
-    """The garment prior from two body meshes: Anny-topology bodies get the LBS prior with bone
-    transforms recovered from the meshes (as in training); any other topology the rig-free prior."""
-    rig = match_anny_rig(len(canonical), faces)
-    if rig is None:
-        return rigfree_prior(garment, canonical, target, faces)
-    indices, weights, num_bones = rig
-    return recovered_lbs_prior(garment, canonical, target, indices, weights, num_bones)
 
 
 def make_sample(

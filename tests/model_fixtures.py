@@ -78,7 +78,7 @@ def make_sample(
     body = anny_body()
     can, tgt = _posed(0), _posed(pose_id)
     g, faces, pinned = ring_garment(can.vertices, n_around, n_down, seed=seed)
-    w = transfer_weights(g, can.vertices, _body_weights(), k=4)
+    w = transfer_weights(g, can.vertices, _body_weights())
     prior = lbs_prior(g, w, can.transforms, tgt.transforms)
     depth = np.clip((0.0 - g[:, 2]) / 0.45, 0.0, 1.0)[:, None]
     centre = prior[pinned].mean(axis=0)

@@ -4,7 +4,9 @@
   from the nearest canonical body vertices, see ``garsim.geometry.skinning.lbs_prior``.
 - Unrigged bodies (``MeshPairBody``): each body vertex gets a local rotation from its
   neighbourhood (Kabsch over its incident edges, smoothed over ``rings`` rings), and each
-  garment vertex follows its k nearest body vertices rigidly: B̄_q + R_q (G - B_q), blended.
+  garment vertex follows its soft anchor's body vertices rigidly: B̄_q + R_q (G - B_q), blended.
+Both blend body vertices with the soft anchor (``geometry.proximity.soft_anchor``), so the prior is a
+continuous function of the garment and the bodies.
 """
 
 from __future__ import annotations
@@ -14,9 +16,9 @@ import scipy.sparse as sp
 
 from garsim.bodies.base import BodyModel, PosedBody
 from garsim.geometry.mesh import unique_edges
-from garsim.geometry.proximity import cached_nearest, nearest_vertices
+from garsim.geometry.proximity import soft_anchor
+from garsim.geometry.skinning import apply_transforms
 
-DEFAULT_K = 4
 
 
 def vertex_rotations(
@@ -49,57 +51,52 @@ def vertex_rotations(
     return np.einsum("vij,vjk->vik", u, vt).transpose(0, 2, 1)
 
 
-def rigfree_prior(
-    garment: np.ndarray, canonical: np.ndarray, target: np.ndarray, faces: np.ndarray, k: int = DEFAULT_K
-) -> np.ndarray:
+def rigfree_prior(garment: np.ndarray, canonical: np.ndarray, target: np.ndarray, faces: np.ndarray) -> np.ndarray:
     """Prior for a body given only as a canonical/target mesh pair of one topology."""
     g = np.asarray(garment, dtype=np.float64)
-    idx, dist = nearest_vertices(g, canonical, k=k)
-    idx, dist = idx.reshape(len(g), -1), dist.reshape(len(g), -1)
-    used, inverse = np.unique(idx, return_inverse=True)
-    rot = vertex_rotations(canonical, target, faces, subset=used)[inverse.reshape(idx.shape)]
-    w = 1.0 / np.maximum(dist, 1e-6)
-    w /= w.sum(axis=1, keepdims=True)
-    local = g[:, None, :] - canonical[idx]
-    moved = target[idx] + np.einsum("nkij,nkj->nki", rot, local)
-    return np.einsum("nk,nki->ni", w, moved).astype(np.float32)
+    c = np.asarray(canonical, dtype=np.float64)
+    t = np.asarray(target, dtype=np.float64)
+    w = soft_anchor(g, c).tocoo()
+    used, inverse = np.unique(w.col, return_inverse=True)
+    rot = vertex_rotations(c, t, faces, subset=used)[inverse]
+    moved = t[w.col] + np.einsum("mij,mj->mi", rot, g[w.row] - c[w.col])
+    out = np.zeros_like(g)
+    np.add.at(out, w.row, w.data[:, None] * moved)
+    return out.astype(np.float32)
 
 
-def garment_prior(
-    body: BodyModel, canonical: PosedBody, target: PosedBody, garment: np.ndarray, k: int = DEFAULT_K
-) -> np.ndarray:
-    """G^prior of ``garment`` (draped on ``canonical``) on ``target``."""
+def garment_prior(body: BodyModel, canonical: PosedBody, target: PosedBody, garment: np.ndarray) -> np.ndarray:
+    """G^prior of ``garment`` (draped on ``canonical``) on ``target``: the LBS prior with the skinning weights
+    of the soft anchor's nearby body vertices (the rig-free prior for bodies without a rig)."""
     if body.skin_weights is None or canonical.transforms is None or target.transforms is None:
-        return rigfree_prior(garment, canonical.vertices, target.vertices, body.faces, k=k)
-    # Same as lbs_prior(garment, transfer_weights(garment, canonical, dense_weights(...), k), ...):
-    # blending is linear in the weights, so each garment vertex's blended matrix is the
-    # inverse-distance blend of its k nearest body vertices' blended matrices, and those need
-    # only the body's sparse skinning (9 bones per vertex) for the body vertices actually used.
-    dist, idx = cached_nearest(garment, canonical.vertices, k=k)  # shared with the model's q query
-    g = np.asarray(garment, dtype=np.float64)
-    if k == 1:
-        a = np.ones((len(g), 1))
-    else:
-        a = 1.0 / np.maximum(dist, 1e-6)
-        a /= a.sum(axis=1, keepdims=True)
-    used, inverse = np.unique(idx, return_inverse=True)
+        return rigfree_prior(garment, canonical.vertices, target.vertices, body.faces)
+    # Same as lbs_prior(garment, transfer_weights(garment, canonical, dense_weights(...)), ...): blending is
+    # linear in the weights, so each garment vertex's blended matrix is the soft-anchor blend of its body
+    # vertices' blended matrices, and those need only the body's sparse skinning for the vertices used.
+    w = soft_anchor(garment, canonical.vertices).tocsc()
+    used = np.flatnonzero(np.diff(w.indptr))
+    w = w[:, used]
     si = np.asarray(body.skin_indices)[used]
     sw = np.asarray(body.skin_weights, dtype=np.float64)[used]
+    g = np.asarray(garment, dtype=np.float64)
 
     def blended(transforms: np.ndarray) -> np.ndarray:
         t = np.asarray(transforms, dtype=np.float64).reshape(-1, 16)
         per_body = np.einsum("us,usf->uf", sw, t[si])
-        return np.einsum("nk,nkf->nf", a, per_body[inverse.reshape(idx.shape)]).reshape(-1, 4, 4)
+        return np.asarray(w @ per_body).reshape(-1, 4, 4)
 
-    # M_tgt M_can^-1 [g; 1] without a batched 4x4 inverse: bone transforms are affine, so a
-    # blend is [[A, t], [0, s]] (s = weight sum) and M_can^-1 [g; 1] = [A^-1 (g - t/s); 1/s]
-    # with A^-1 b by Cramer's rule (rows r0, r1, r2 of A; det = r0 . (r1 x r2)).
-    m_can, m_tgt = blended(canonical.transforms), blended(target.transforms)
-    s_can = m_can[:, 3, 3]
-    b = g - m_can[:, :3, 3] / s_can[:, None]
-    r0, r1, r2 = m_can[:, 0, :3], m_can[:, 1, :3], m_can[:, 2, :3]
-    c0, c1, c2 = np.cross(r1, r2), np.cross(r2, r0), np.cross(r0, r1)
-    det = np.einsum("ni,ni->n", r0, c0)
-    x = (c0 * b[:, :1] + c1 * b[:, 1:2] + c2 * b[:, 2:3]) / det[:, None]
-    out = np.einsum("nij,nj->ni", m_tgt[:, :3, :3], x) + m_tgt[:, :3, 3] / s_can[:, None]
-    return out.astype(np.float32)
+    composite = blended(target.transforms) @ np.linalg.inv(blended(canonical.transforms))
+    return apply_transforms(g, composite).astype(np.float32)
+
+
+def mesh_pair_prior(garment: np.ndarray, canonical: np.ndarray, target: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """The garment prior from two body meshes: Anny-topology bodies get the LBS prior with bone transforms
+    recovered from the meshes (as in training); any other topology the rig-free prior."""
+    from garsim.bodies.anny import match_anny_rig
+    from garsim.bodies.recover import recovered_lbs_prior
+
+    rig = match_anny_rig(len(canonical), faces)
+    if rig is None:
+        return rigfree_prior(garment, canonical, target, faces)
+    indices, weights, num_bones = rig
+    return recovered_lbs_prior(garment, canonical, target, indices, weights, num_bones)

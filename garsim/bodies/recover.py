@@ -18,7 +18,6 @@ from scipy.linalg import cho_factor, cho_solve
 from garsim.geometry.cache import ContentCache, content_key
 from garsim.geometry.skinning import apply_transforms, blended_transforms, dense_weights, transfer_weights
 
-DEFAULT_K = 4
 DEFAULT_DAMPING = 1e-4
 
 
@@ -96,11 +95,10 @@ def recovered_lbs_prior(
     skin_indices: np.ndarray,
     skin_weights: np.ndarray,
     num_bones: int,
-    k: int = DEFAULT_K,
 ) -> np.ndarray:
     """The LBS prior from a canonical/target mesh pair of a rigged topology (no pose parameters)."""
     bones = fit_bone_transforms(canonical, target, skin_indices, skin_weights, num_bones)
     key = _rig_key(canonical, skin_indices, skin_weights, num_bones, DEFAULT_DAMPING)
     dense = _rig_system(key, canonical, skin_indices, skin_weights, num_bones, DEFAULT_DAMPING).dense
-    w = transfer_weights(garment, canonical, dense, k=k)
+    w = transfer_weights(garment, canonical, dense)
     return apply_transforms(np.asarray(garment, dtype=np.float64), blended_transforms(w, bones)).astype(np.float32)

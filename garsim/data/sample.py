@@ -8,9 +8,11 @@ from typing import Any
 import numpy as np
 
 FABRICS: tuple[str, ...] = ("silk", "cotton", "denim", "leather")
-"""Fabric names in one-hot order (the paper's f)."""
+"""Preset fabric names, lightest to stiffest (their physical values: ``garsim.garments.fabrics``)."""
+CUSTOM_FABRIC = "custom"
+"""The fabric name of a sample given by physical values (``Sample.fabric_values``) rather than a preset."""
 
-GARMENT_TYPES: tuple[str, ...] = ("skirt", "top", "tshirt", "trousers", "dress")
+GARMENT_TYPES: tuple[str, ...] = ("skirt", "top", "tshirt", "longsleeve", "trousers", "dress")
 
 
 @dataclass
@@ -32,11 +34,12 @@ class Sample:
     garment_type: str
     target: np.ndarray | None = None  # (N, 3) ground truth G-bar
     meta: dict[str, Any] = field(default_factory=dict)
+    fabric_values: dict[str, float] | None = None  # physical values (bending N·m, density kg/m², ...), else the preset's
 
     def __post_init__(self) -> None:
         n = len(self.garment)
-        if self.fabric not in FABRICS:
-            raise ValueError(f"unknown fabric {self.fabric!r}; choose one of {FABRICS}")
+        if self.fabric not in FABRICS and not (self.fabric == CUSTOM_FABRIC and self.fabric_values):
+            raise ValueError(f"unknown fabric {self.fabric!r}; choose one of {FABRICS} (or physical values)")
         if self.body_canonical.shape != self.body_target.shape:
             raise ValueError(
                 f"canonical body {self.body_canonical.shape} and target body "
@@ -48,7 +51,3 @@ class Sample:
                 raise ValueError(f"{name} has shape {arr.shape}, expected ({n}, 3) like the garment")
         if self.pinned.shape != (n,):
             raise ValueError(f"pinned mask has shape {self.pinned.shape}, expected ({n},)")
-
-    @property
-    def fabric_index(self) -> int:
-        return FABRICS.index(self.fabric)

@@ -80,6 +80,7 @@ class SequenceRecord:
                 prior=lv.priors[k],
                 target=lv.targets[k],
                 fabric=self.fabric,
+                fabric_values=self.meta.get("fabric_values"),
                 garment_type=self.garment_type,
                 meta={**self.meta, "seq_id": self.seq_id, "frame": int(self.frames[k]), "split": self.split,
                       "name": f"{self.seq_id}@{int(self.frames[k])}"},

@@ -97,3 +97,28 @@ def boundary_edges(faces: np.ndarray) -> np.ndarray:
     e.sort(axis=1)
     uniq, counts = np.unique(e, axis=0, return_counts=True)
     return uniq[counts == 1]
+
+
+def vertex_rings(vertices: np.ndarray, faces: np.ndarray, k: int) -> np.ndarray:
+    """(V, k) each vertex itself, then its mesh 1-ring neighbours nearest first, padded with itself.
+
+    Mesh connectivity, not Euclidean kNN: a kNN set on a regular mesh has distance ties that flip
+    under float rounding of a moved scene, while the ring's membership is fixed by the faces. Only a
+    vertex of valence above k - 1 loses its farthest neighbours.
+    """
+    v = np.asarray(vertices, dtype=np.float64)
+    n = len(v)
+    tab = np.repeat(np.arange(n, dtype=np.int64)[:, None], k, axis=1)
+    if k < 2 or len(faces) == 0:
+        return tab
+    e = unique_edges(faces)
+    src = np.concatenate([e[:, 0], e[:, 1]])
+    dst = np.concatenate([e[:, 1], e[:, 0]])
+    dist = np.linalg.norm(v[dst] - v[src], axis=1)
+    order = np.lexsort((dst, dist, src))
+    src, dst = src[order], dst[order]
+    start = np.searchsorted(src, np.arange(n))
+    rank = np.arange(len(src)) - start[src]
+    keep = rank < k - 1
+    tab[src[keep], 1 + rank[keep]] = dst[keep]
+    return tab

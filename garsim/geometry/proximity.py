@@ -1,8 +1,10 @@
-"""Nearest-body-vertex queries (KD-tree) and the DeePSD-style signed side test."""
+"""Proximity to a body: KD-tree queries, the soft anchor (a continuous blend of nearby body vertices),
+the DeePSD-style signed side test and a continuous push-out."""
 
 from __future__ import annotations
 
 import numpy as np
+import scipy.sparse as sp
 from scipy.spatial import cKDTree
 
 from garsim.geometry.cache import ContentCache, content_key
@@ -47,6 +49,52 @@ def nearest_vertices(points: np.ndarray, vertices: np.ndarray, k: int = 1) -> tu
     return idx.astype(np.int64), dist
 
 
+SOFT_ANCHOR_WIDTH = 0.02
+"""m: the soft anchor blends the body vertices whose squared distance is within this width squared
+of the nearest one's (about a 2 cm patch of body surface around the closest point)."""
+_SOFT_CACHE = ContentCache(8)
+
+
+def soft_anchor(points: np.ndarray, vertices: np.ndarray, width: float = SOFT_ANCHOR_WIDTH) -> sp.csr_matrix:
+    """(N, V) row-stochastic sparse weights blending, for each point, the body vertices near its closest one.
+
+    w_ij ∝ (1 - (d_ij² - d_i,min²) / width²)₊², so every weight is a continuous function of the point
+    and the body: a vertex enters or leaves the blend with weight zero, and where two body parts are
+    equally near (between the legs) both are blended instead of one being picked. This replaces the
+    hard nearest-vertex choice (q_i) and k-nearest sets whose membership flips under float rounding.
+    Cached by content; computed in float64.
+    """
+    if width <= 0:
+        raise ValueError(f"soft anchor width must be > 0 metres, got {width}")
+    pts = np.ascontiguousarray(points, dtype=np.float64)
+    verts = np.ascontiguousarray(vertices, dtype=np.float64)
+    return _SOFT_CACHE.get(content_key(pts, verts) + (float(width),), lambda: _soft_anchor(pts, verts, width))
+
+
+def _soft_anchor(pts: np.ndarray, verts: np.ndarray, width: float) -> sp.csr_matrix:
+    n, nv = len(pts), len(verts)
+    tree = cached_tree(verts)
+    k = min(48, nv)
+    rows, cols, vals = [], [], []
+    todo = np.arange(n)
+    while len(todo):
+        d, idx = tree.query(pts[todo], k=k)
+        d = np.asarray(d, dtype=np.float64).reshape(len(todo), k)
+        idx = np.asarray(idx, dtype=np.int64).reshape(len(todo), k)
+        excess = (d**2 - d[:, :1] ** 2) / width**2
+        complete = (excess[:, -1] >= 1.0) | (k == nv)  # the blend's whole support was found
+        w = np.clip(1.0 - excess[complete], 0.0, None) ** 2
+        r = np.repeat(todo[complete], k)
+        keep = w.ravel() > 0
+        rows.append(r[keep])
+        cols.append(idx[complete].ravel()[keep])
+        vals.append(w.ravel()[keep])
+        todo = todo[~complete]
+        k = min(4 * k, nv)
+    m = sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(n, nv))
+    return sp.diags(1.0 / np.asarray(m.sum(axis=1)).ravel()) @ m
+
+
 def signed_offset_to_nearest(points: np.ndarray, body_vertices: np.ndarray, body_normals: np.ndarray) -> np.ndarray:
     """(x - b_q) . n_q for each point's nearest body vertex q: negative means inside the body."""
     idx, _ = nearest_vertices(points, body_vertices)
@@ -56,13 +104,15 @@ def signed_offset_to_nearest(points: np.ndarray, body_vertices: np.ndarray, body
 def push_outside(
     points: np.ndarray, body_vertices: np.ndarray, body_normals: np.ndarray, margin: float = 0.002
 ) -> np.ndarray:
-    """Move points that are inside (or closer than ``margin`` to) the body out along the nearest body
-    vertex normal to ``margin`` in front of it; other points are unchanged. A post-process for
-    predicted garments (the same nearest-vertex/normal test as DeePSD's collision count)."""
+    """Move points that are inside (or closer than ``margin`` to) the body out to ``margin`` in front of it,
+    along the soft anchor's blended normal (a continuous function of the point: no jump where the nearest
+    body vertex changes); other points are unchanged. A post-process for predicted garments."""
     p = np.array(points, dtype=np.float64)
-    _, idx = cached_tree(body_vertices).query(p)  # one tree per body: many garments on one pose reuse it
-    n = np.asarray(body_normals, dtype=np.float64)[idx]
-    offset = np.einsum("ij,ij->i", p - np.asarray(body_vertices, dtype=np.float64)[idx], n)
+    w = soft_anchor(p, body_vertices)
+    a = w @ np.asarray(body_vertices, dtype=np.float64)
+    n = w @ np.asarray(body_normals, dtype=np.float64)
+    n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-12)
+    offset = np.einsum("ij,ij->i", p - a, n)
     fix = offset < margin
     p[fix] += (margin - offset[fix])[:, None] * n[fix]
     return p.astype(np.asarray(points).dtype)

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from garsim.geometry.proximity import nearest_vertices
+from garsim.geometry.proximity import soft_anchor
 
 
 def dense_weights(indices: np.ndarray, weights: np.ndarray, num_bones: int) -> np.ndarray:
@@ -21,25 +21,10 @@ def dense_weights(indices: np.ndarray, weights: np.ndarray, num_bones: int) -> n
     return dense
 
 
-def transfer_weights(
-    points: np.ndarray,
-    body_vertices: np.ndarray,
-    body_dense_weights: np.ndarray,
-    k: int = 1,
-) -> np.ndarray:
-    """Skinning weights of ``points`` from their nearest canonical body vertex.
-
-    With ``k > 1`` the weights of the k nearest body vertices are blended by inverse
-    distance, which removes seams where neighbouring garment vertices pick different bones.
-    """
-    if k < 1:
-        raise ValueError(f"k must be >= 1, got {k}")
-    idx, dist = nearest_vertices(points, body_vertices, k=k)
-    if k == 1:
-        return body_dense_weights[idx]
-    w = 1.0 / np.maximum(dist, 1e-6)
-    w /= w.sum(axis=1, keepdims=True)
-    return np.einsum("nk,nkj->nj", w, body_dense_weights[idx])
+def transfer_weights(points: np.ndarray, body_vertices: np.ndarray, body_dense_weights: np.ndarray) -> np.ndarray:
+    """Skinning weights of ``points``: the soft anchor's blend of nearby canonical body vertices' weights
+    (continuous in the points; no seam where neighbouring garment vertices pick different bones)."""
+    return np.asarray(soft_anchor(points, body_vertices) @ np.asarray(body_dense_weights, dtype=np.float64))
 
 
 def blended_transforms(weights: np.ndarray, transforms: np.ndarray) -> np.ndarray:

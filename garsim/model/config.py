@@ -19,12 +19,16 @@ def check_known_keys(cls: type, d: dict[str, Any]) -> None:
         raise ValueError(f"unknown {cls.__name__} keys {sorted(unknown)}; known keys: {sorted(known)}")
 
 
+FABRIC_FEATURES = 3
+"""Fabric input per vertex: log bending rigidity, areal density, stretch (silk = 0, leather = 1)."""
+
+
 @dataclass
 class GarSimConfig:
     """Hyperparameters of GarSim; saved next to the weights as JSON.
 
-    Inputs: ``knn_garment`` (k nearest garment vertices) / ``knn_body`` (q and its body-mesh
-    1-ring by vertex index, padded with q) neighbourhood sizes of the geometry encoder;
+    Inputs: ``knn_garment`` / ``knn_body``: slots of the geometry encoder's neighbourhoods (a vertex
+    and its mesh 1-ring, nearest first, padded with itself) on the garment and on the body;
     ``canonicalize_yaw`` expresses every vector in a frame fixed to the canonical body's
     heading (exact equivariance to rotations about the vertical axis); ``semantic`` picks
     the body-semantic input: ``"grid"`` (the binary mask over body vertices splatted onto a
@@ -33,7 +37,7 @@ class GarSimConfig:
     """
 
     # inputs (Eq. 2)
-    knn_garment: int = 8
+    knn_garment: int = 10  # garment mesh-ring slots: the vertex and up to 9 neighbours (irregular meshes)
     knn_body: int = 9  # body neighbourhood slots: q and its mesh 1-ring (Anny's valence <= 8)
     canonicalize_yaw: bool = True
     semantic: str = "grid"
@@ -60,6 +64,8 @@ class GarSimConfig:
     # decoder
     head: str = "direction_magnitude"
     magnitude_bias_init: float = -3.0
+    # fabric conditioning (a deviation: the paper concatenates a one-hot f to the node input only)
+    fabric_film: bool = True  # the fabric's physical values also scale/shift every edge update (FiLM) and the magnitude
 
     def __post_init__(self) -> None:
         self.semantic_grid = tuple(int(v) for v in self.semantic_grid)  # type: ignore[assignment]

@@ -14,7 +14,7 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
-from garsim.model.config import GarSimConfig
+from garsim.model.config import FABRIC_FEATURES, GarSimConfig
 from garsim.model.encoders import MLP
 
 
@@ -27,6 +27,10 @@ class Decoder(nn.Module):
         self.scale = float(cfg.pos_scale)
         d_out = 4 if cfg.head == "direction_magnitude" else 3
         self.mlp = MLP(cfg.latent, cfg.mlp_hidden, d_out, cfg.mlp_layers, cfg.activation, norm=False)
+        self.fabric_gain = nn.Linear(FABRIC_FEATURES, 1) if cfg.fabric_film else None  # log-scale of the magnitude
+        if self.fabric_gain is not None:
+            nn.init.zeros_(self.fabric_gain.weight)
+            nn.init.zeros_(self.fabric_gain.bias)
         last = self.mlp[-1]
         with torch.no_grad():
             last.weight.mul_(0.1)
@@ -34,11 +38,15 @@ class Decoder(nn.Module):
             if cfg.head == "direction_magnitude":
                 last.bias[3] = cfg.magnitude_bias_init  # start near the prior (softplus(-3)/10 = 5 mm)
 
-    def forward(self, node: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor | None, torch.Tensor | None]:
+    def forward(
+        self, node: torch.Tensor, fabric: torch.Tensor | None = None
+    ) -> tuple[torch.Tensor, torch.Tensor | None, torch.Tensor | None]:
         """Return (vector, direction, magnitude); direction/magnitude are None for the alternative heads."""
         out = self.mlp(node)
         if self.head == "direction_magnitude":
             direction = F.normalize(out[:, :3], dim=-1, eps=1e-8)
             magnitude = F.softplus(out[:, 3:4]) / self.scale
+            if self.fabric_gain is not None and fabric is not None:
+                magnitude = magnitude * torch.exp(self.fabric_gain(fabric))
             return direction * magnitude, direction, magnitude[:, 0]
         return out / self.scale, None, None

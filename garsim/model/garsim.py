@@ -12,8 +12,8 @@ from torch import nn
 from torch_geometric.data import Data
 
 from garsim.atomic import atomic_write
-from garsim.data.sample import FABRICS, Sample
-from garsim.model.config import GarSimConfig
+from garsim.data.sample import Sample
+from garsim.model.config import FABRIC_FEATURES, GarSimConfig
 from garsim.model.decoder import Decoder
 from garsim.model.encoders import (
     BodyAwareEncoder,
@@ -46,7 +46,7 @@ class GarSimModel(nn.Module):
         self.config = cfg = config or GarSimConfig()
         self.geometry = GeometryEncoder(cfg)
         self.semantic = BodySemanticEncoder(cfg)
-        self.garment_encoder = GarmentAwareEncoder(cfg, len(FABRICS))
+        self.garment_encoder = GarmentAwareEncoder(cfg, FABRIC_FEATURES)
         self.body_encoder = BodyAwareEncoder(cfg)
         self.node_encoder = NodeEncoder(cfg)
         self.edge_encoder = EdgeEncoder(cfg)
@@ -58,7 +58,11 @@ class GarSimModel(nn.Module):
         the body-frame displacement, direction and magnitude."""
         batch = node_batch(data)
         x_gar = self.geometry(data.gar_rel)
-        x_body = self.geometry(data.body_rel).index_select(0, data.q_slot)  # per distinct q -> per vertex
+        # body geometry at each soft anchor: the anchor weights' blend of the anchoring vertices' features
+        rows, slots = data.anchor_index[0], data.anchor_index[1]
+        enc = self.geometry(data.body_rel)
+        x_body = enc.new_zeros(data.num_nodes, enc.shape[1]).index_add_(
+            0, rows, enc.index_select(0, slots) * data.anchor_weight[:, None])
         single = data.rot.shape[0] == 1
         s = self.semantic(data.sem)
         s = s.expand(batch.shape[0], -1) if single else s[batch]
@@ -66,10 +70,10 @@ class GarSimModel(nn.Module):
         mu = self.body_encoder(x_body, data.delta, s)
         eta = self.node_encoder(chi, mu)
         pi = self.edge_encoder(data.edge_attr)
-        eta, _ = self.processor(eta, pi, data.edge_index)
-        vec, direction, magnitude = self.decoder(eta)
+        eta, _ = self.processor(eta, pi, data.edge_index, data.fabric)
+        vec, direction, magnitude = self.decoder(eta, data.fabric)
         if single:  # R^T v for every row: body frame -> world
-            world = vec @ data.rot[0]
+            world = vec @ data.rot[0].to(vec.dtype)
         else:
             world = torch.einsum("nij,ni->nj", data.rot[batch], vec)
         base = data.anchor if self.config.head == "position" else data.prior

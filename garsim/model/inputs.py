@@ -1,13 +1,17 @@
 """Sample -> garment graph: every input of the paper's Eq. 2, vectorised, as a torch_geometric Data.
 
-Per garment vertex i: q_i (canonical body vertex nearest G_i, KD-tree), δ_i = B̄_q − B_q,
-p_i = G_i − B_q, p^prior_i = G^prior_i − B̄_q, fabric one-hot f, pinned flag; per directed
-mesh edge (i -> j): E_ij = G_j − G_i and E^prior_ij; local neighbourhoods for the geometry
-encoder (k nearest garment vertices of G_i relative to G_i; and, once per distinct q, the
-body vertex q with its body-mesh 1-ring relative to B_q, i.e. the body's geometry "at q_i");
-the garment-aware body-semantic input (binary mask over the body vertices in q); faces and
-face pairs for the losses. Everything about the canonical body alone (KD-tree, yaw frame,
-rings) is computed once per body and cached by content (see ``body_frame``).
+Continuity (a deviation from the paper, which takes q_i = the nearest body vertex): every feature is
+a continuous function of the input geometry. q_i is the garment vertex's *soft anchor*, a blend of
+the canonical body vertices near its closest one (``geometry.proximity.soft_anchor``: weights that
+vanish where a vertex enters or leaves the blend), so where the nearest body vertex would jump (between
+the legs, under the arms) the inputs move smoothly. Per garment vertex i, with the anchor weights w_ij:
+B_q = Σ w_ij B_j, B̄_q = Σ w_ij B̄_j, δ_i = B̄_q − B_q, p_i = G_i − B_q, p^prior_i = G^prior_i − B̄_q,
+the body geometry "at q_i" = Σ w_ij X^body_j (the geometry encoder's output on each body vertex's mesh
+1-ring); the garment geometry uses each vertex's mesh 1-ring (not kNN sets, whose ties flip); the
+body-semantic input splats max_i w_ij per body vertex. Fabric: physical values (log bending rigidity,
+areal density and stretch, scaled so silk = 0 and leather = 1), not a one-hot. Per directed mesh
+edge (i -> j): E_ij = G_j − G_i and E^prior_ij. Faces and face pairs for the losses. Everything about
+the canonical body alone (KD-tree, yaw frame, rings) is computed once per body and cached by content.
 
 Frame: all vectors are expressed in a body frame (rotation ``rot``, world -> frame) whose
 yaw comes from the canonical body alone (see ``body_yaw_frame``), so a rotation of the whole
@@ -22,14 +26,17 @@ from collections import OrderedDict
 from collections.abc import Iterable, Sequence
 
 import numpy as np
+import scipy.sparse as sp
 import torch
 from scipy.spatial import cKDTree
 from torch_geometric.data import Batch, Data
 
-from garsim.data.sample import FABRICS, Sample
-from garsim.geometry.proximity import cached_nearest, cached_tree
-from garsim.geometry.mesh import directed_edges, face_normals, face_pairs, unique_edges
-from garsim.model.config import GarSimConfig
+from garsim.data.sample import Sample
+from garsim.garments.fabrics import FABRICS as FABRIC_PRESETS
+from garsim.garments.fabrics import Fabric, fabric_from_values, get_fabric
+from garsim.geometry.mesh import directed_edges, face_normals, face_pairs, vertex_rings
+from garsim.geometry.proximity import cached_tree, soft_anchor
+from garsim.model.config import FABRIC_FEATURES, GarSimConfig
 
 _CACHE_SIZE = 8
 _BODY_CACHE: OrderedDict[tuple, "BodyFrame"] = OrderedDict()
@@ -55,8 +62,8 @@ class BodyFrame:
     """Everything about one canonical body that does not depend on the garment, computed once.
 
     KD-tree, yaw frame ``rot`` (world -> body frame, identity without ``canonicalize_yaw``),
-    the body's vertices in that frame, and (lazily) each body vertex's mesh neighbourhood,
-    the point set the geometry encoder sees at ``q``.
+    the body's vertices in that frame (float64 and float32), and (lazily) each body vertex's mesh
+    neighbourhood, the point set the geometry encoder sees there.
     """
 
     def __init__(self, body_canonical: np.ndarray, faces: np.ndarray, canonicalize_yaw: bool):
@@ -65,34 +72,17 @@ class BodyFrame:
             raise ValueError("the canonical body has non-finite vertices: fix the body mesh")
         self.faces = np.asarray(faces, dtype=np.int64)
         self.tree = cached_tree(self.vertices)
-        rot = body_yaw_frame(self.vertices) if canonicalize_yaw else np.eye(3)
-        self.rot = rot.astype(np.float32)
-        self.framed = self.vertices @ self.rot.T
+        self.rot64 = body_yaw_frame(self.vertices) if canonicalize_yaw else np.eye(3)
+        self.rot = self.rot64.astype(np.float32)
+        self.framed64 = self.vertices.astype(np.float64) @ self.rot64.T
+        self.framed = self.framed64.astype(np.float32)
         self.bounds = (self.framed.min(axis=0), self.framed.max(axis=0))
         self._rings: dict[int, np.ndarray] = {}
 
     def ring(self, k: int) -> np.ndarray:
-        """(Vb, k) each body vertex itself, then its 1-ring neighbours (by index), padded with itself.
-
-        Mesh connectivity, not Euclidean kNN: distance ties on the body's regular mesh would make
-        a kNN set flip under float rounding of a moved scene; the ring (and its order) is exactly
-        invariant. Anny's valence is at most 8, so k = 9 keeps whole rings; on bodies with larger
-        valence the ring is cut to the k - 1 lowest-index neighbours.
-        """
+        """(Vb, k) each body vertex itself, then its mesh 1-ring (``geometry.mesh.vertex_rings``)."""
         if k not in self._rings:
-            v = len(self.vertices)
-            tab = np.repeat(np.arange(v, dtype=np.int64)[:, None], k, axis=1)
-            if k > 1 and len(self.faces):
-                e = unique_edges(self.faces)
-                src = np.concatenate([e[:, 0], e[:, 1]])
-                dst = np.concatenate([e[:, 1], e[:, 0]])
-                order = np.lexsort((dst, src))
-                src, dst = src[order], dst[order]
-                start = np.searchsorted(src, np.arange(v))
-                rank = np.arange(len(src)) - start[src]
-                keep = rank < k - 1
-                tab[src[keep], 1 + rank[keep]] = dst[keep]
-            self._rings[k] = tab
+            self._rings[k] = vertex_rings(self.vertices, self.faces, k)
         return self._rings[k]
 
 
@@ -136,17 +126,21 @@ def semantic_vector(
     q: np.ndarray,
     config: GarSimConfig,
     bounds: tuple[np.ndarray, np.ndarray] | None = None,
+    weights: np.ndarray | None = None,
 ) -> np.ndarray:
-    """The garment-aware body-semantic input: the binary mask of body vertices in q, (D,) float32.
+    """The garment-aware body-semantic input: the mask of body vertices in q, (D,) float32.
 
-    ``"vertex"`` mode returns the paper's mask itself (length = body vertex count).
+    ``weights`` (one per entry of ``q``, in [0, 1]) make the mask soft (the largest anchor weight each body
+    vertex gets from any garment vertex: continuous in the garment); None is the paper's binary mask.
+    ``"vertex"`` mode returns the mask itself (length = body vertex count).
     ``"grid"`` mode (default, any body topology) splats the masked vertices trilinearly onto a
     fixed grid in body-normalised coordinates (x, y centred on the body's bounding box and
     divided by its height, z from the feet up divided by the height; x in [-.5, .5],
     y in [-.25, .25], z in [0, 1]) and saturates each cell with 1 - exp(-count).
     ``bounds`` = the body's (min, max) corners, if already known (``BodyFrame.bounds``).
     """
-    uq = np.unique(q)
+    uq = np.asarray(q)
+    mass = np.ones(len(uq)) if weights is None else np.asarray(weights, dtype=np.float64)
     if config.semantic == "vertex":
         nb = int(config.num_body_vertices)  # type: ignore[arg-type]
         if len(body_canonical_frame) != nb:
@@ -155,7 +149,7 @@ def semantic_vector(
                 f"{len(body_canonical_frame)}; use semantic='grid' for other body topologies"
             )
         mask = np.zeros(nb, dtype=np.float32)
-        mask[uq] = 1.0
+        mask[uq] = mass
         return mask
     b = body_canonical_frame
     lo, hi = bounds if bounds is not None else (b.min(axis=0), b.max(axis=0))
@@ -178,26 +172,15 @@ def semantic_vector(
     w = np.prod(np.where(off[None] == 1, t[:, None, :], 1.0 - t[:, None, :]), axis=2)  # (U, 8)
     idx = i0[:, None, :] + off[None]
     flat = (idx[..., 0] * dims[1] + idx[..., 1]) * dims[2] + idx[..., 2]
-    grid = np.bincount(flat.ravel(), weights=w.ravel(), minlength=int(np.prod(dims)))
+    grid = np.bincount(flat.ravel(), weights=(w * mass[:, None]).ravel(), minlength=int(np.prod(dims)))
     return (1.0 - np.exp(-grid)).astype(np.float32)
-
-
-def _knn_self(points: np.ndarray, k: int) -> np.ndarray:
-    """(N, k) indices of the k nearest points (self first); padded with self when N < k."""
-    n = len(points)
-    kk = min(k, n)
-    _, idx = cKDTree(points).query(points, k=kk)
-    idx = np.asarray(idx, dtype=np.int64).reshape(n, kk)
-    if kk < k:
-        idx = np.concatenate([idx, np.repeat(np.arange(n)[:, None], k - kk, axis=1)], axis=1)
-    return idx
 
 
 _GARMENT_CACHE: OrderedDict[tuple, tuple[np.ndarray, np.ndarray]] = OrderedDict()
 
 
 def garment_topology(garment: np.ndarray, faces: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray]:
-    """(N, k) garment kNN (self first) and (2, 2E) receiver-sorted directed edges of a template garment.
+    """(N, k) garment mesh rings (self first) and (2, 2E) receiver-sorted directed edges of a template garment.
 
     Both depend only on the canonical garment, so they are cached by content: draping one garment
     on a sequence of target poses computes them once.
@@ -209,19 +192,20 @@ def garment_topology(garment: np.ndarray, faces: np.ndarray, k: int) -> tuple[np
     def make() -> tuple[np.ndarray, np.ndarray]:
         ei = directed_edges(f)
         ei = np.ascontiguousarray(ei[:, np.argsort(ei[1], kind="stable")])  # receiver-sorted (CSR mean)
-        return _knn_self(g, k), ei
+        return vertex_rings(g, f, k), ei
 
     return _lru_get(_GARMENT_CACHE, key, make)
 
 
 def clear_caches() -> None:
-    """Forget every cached body frame, garment topology, KD-tree and nearest-vertex answer."""
+    """Forget every cached body frame, garment topology, KD-tree and soft anchor."""
     from garsim.geometry import proximity
 
     _BODY_CACHE.clear()
     _GARMENT_CACHE.clear()
     proximity._TREE_CACHE.clear()
     proximity._QUERY_CACHE.clear()
+    proximity._SOFT_CACHE.clear()
 
 
 class GarmentGraph(Data):
@@ -232,16 +216,39 @@ class GarmentGraph(Data):
             return self.num_nodes
         if key == "face_pairs":
             return int(self.faces.shape[0])
-        if key == "q_slot":
-            return int(self.body_rel.shape[0])
+        if key == "anchor_index":
+            return torch.tensor([[self.num_nodes], [int(self.body_rel.shape[0])]])
         if key == "col_batch":
             return 1
         return 0
 
     def __cat_dim__(self, key: str, value, *args, **kwargs):
-        if key == "edge_index":
+        if key in ("edge_index", "anchor_index"):
             return -1
         return 0
+
+
+_FABRIC_SCALE = {
+    key: (np.log(getattr(FABRIC_PRESETS["silk"], key)), np.log(getattr(FABRIC_PRESETS["leather"], key)))
+    for key in ("bending", "density", "stretch")
+}
+
+
+def sample_fabric(sample: Sample) -> Fabric:
+    """The sample's fabric in physical units: its stored values, else the named preset."""
+    if sample.fabric_values:
+        return fabric_from_values(sample.fabric_values, sample.fabric)
+    return get_fabric(sample.fabric)
+
+
+assert len(_FABRIC_SCALE) == FABRIC_FEATURES
+
+
+def fabric_features(sample: Sample) -> np.ndarray:
+    """(FABRIC_FEATURES,) float32: the fabric's physical values on the silk (0) .. leather (1) log scales."""
+    fab = sample_fabric(sample)
+    return np.array([(np.log(getattr(fab, k)) - lo) / (hi - lo) for k, (lo, hi) in _FABRIC_SCALE.items()],
+                    dtype=np.float32)
 
 
 def build_graph(
@@ -274,53 +281,54 @@ def build_graph(
     if not (np.isfinite(g).all() and np.isfinite(prior).all() and np.isfinite(body_t).all()):
         raise ValueError(f"sample {name or ''} has non-finite positions (garment, prior or bodies): fix the data")
 
-    # nearest canonical body vertex q_i (KD-tree of the body, cached per body)
+    # soft anchor q_i: a continuous blend of the canonical body vertices near G_i (cached per garment and body)
     body = body_frame(body_c, sample.body_faces, cfg.canonicalize_yaw)
-    q = cached_nearest(g, body.vertices, k=1)[1][:, 0]
-    r32 = body.rot
+    w = soft_anchor(g, body.vertices).tocoo()
+    used, slot = np.unique(w.col, return_inverse=True)
+    anchor_w = sp.csr_matrix((w.data, (w.row, slot)), shape=(n, len(used)))
+    r64 = body.rot64
 
-    # every vector in the body frame: rotate the points once, then subtract
-    gf = g @ r32.T
-    pf = prior @ r32.T
-    bq = body.framed[q]
-    bq_t = body_t[q]
-    bq_tf = bq_t @ r32.T
+    # every vector in the body frame, in float64 (then float32): rotate the points, then subtract
+    gf = g.astype(np.float64) @ r64.T
+    pf = prior.astype(np.float64) @ r64.T
+    bq = anchor_w @ body.framed64[used]
+    bq_t = anchor_w @ body_t[used].astype(np.float64)
+    bq_tf = bq_t @ r64.T
     p = gf - bq
     p_prior = pf - bq_tf
     delta = bq_tf - bq
-    # body neighbourhoods (X^body at q): each distinct q and its mesh 1-ring, relative to B_q
-    uq, q_slot = np.unique(q, return_inverse=True)
-    nbr = body.ring(cfg.knn_body)[uq]
-    body_rel = body.framed[nbr] - body.framed[uq][:, None, :]
+    # body neighbourhoods (X^body): every anchoring body vertex with its mesh 1-ring, relative to it
+    nbr = body.ring(cfg.knn_body)[used]
+    body_rel = (body.framed64[nbr] - body.framed64[used][:, None, :]).astype(np.float32)
     gidx, ei = garment_topology(g, faces, cfg.knn_garment)
-    gar_rel = gf[gidx] - gf[:, None, :]
+    gar_rel = (gf[gidx] - gf[:, None, :]).astype(np.float32)
 
     snd, rcv = ei[0], ei[1]
-    edge_attr = np.concatenate([gf[rcv] - gf[snd], pf[rcv] - pf[snd]], axis=1)
-
-    fab = np.zeros((n, len(FABRICS)), dtype=np.float32)
-    fab[:, sample.fabric_index] = 1.0
-    sem = semantic_vector(body.framed, uq, cfg, bounds=body.bounds)
+    edge_attr = np.concatenate([gf[rcv] - gf[snd], pf[rcv] - pf[snd]], axis=1).astype(np.float32)
+    fab = np.repeat(fabric_features(sample)[None], n, axis=0)
+    mass = np.zeros(len(used))
+    np.maximum.at(mass, slot, w.data)
+    sem = semantic_vector(body.framed, used, cfg, bounds=body.bounds, weights=mass)
 
     data = GarmentGraph(
         num_nodes=n,
         pos=torch.from_numpy(g.copy()),
         prior=torch.from_numpy(prior.copy()),
-        anchor=torch.from_numpy(bq_t),
-        p=torch.from_numpy(p),
-        p_prior=torch.from_numpy(p_prior),
-        delta=torch.from_numpy(delta),
+        anchor=torch.from_numpy(bq_t.astype(np.float32)),
+        p=torch.from_numpy(p.astype(np.float32)),
+        p_prior=torch.from_numpy(p_prior.astype(np.float32)),
+        delta=torch.from_numpy(delta.astype(np.float32)),
         fabric=torch.from_numpy(fab),
         pinned=torch.from_numpy(np.asarray(sample.pinned, dtype=bool).copy()),
         gar_rel=torch.from_numpy(gar_rel),
         body_rel=torch.from_numpy(body_rel),
-        q_slot=torch.from_numpy(q_slot.reshape(n).astype(np.int64)),
+        anchor_index=torch.from_numpy(np.stack([w.row.astype(np.int64), slot.astype(np.int64)])),
+        anchor_weight=torch.from_numpy(w.data.astype(np.float32)),
         edge_index=torch.from_numpy(ei.copy()),  # the cached array stays private
         edge_attr=torch.from_numpy(edge_attr),
         faces=torch.from_numpy(faces.copy()),
         sem=torch.from_numpy(sem)[None],
-        rot=torch.from_numpy(r32.copy())[None],
-        q=torch.from_numpy(q),
+        rot=torch.from_numpy(body.rot.copy())[None],
         name=name if name is not None else str(sample.meta.get("name", "")),
     )
     if loss_inputs:
@@ -362,10 +370,3 @@ def collision_body(sample: Sample, k: int = 16) -> dict[str, torch.Tensor]:
 def collate(graphs: Sequence[GarmentGraph]) -> Batch:
     """Batch garment graphs of any sizes/topologies (indices offset per graph)."""
     return Batch.from_data_list(list(graphs))
-
-
-def build_batch(
-    samples: Iterable[Sample], config: GarSimConfig | None = None, *, with_collision: bool = False
-) -> Batch:
-    """Several Samples -> one batched graph."""
-    return collate([build_graph(s, config, with_collision=with_collision) for s in samples])

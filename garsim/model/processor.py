@@ -22,7 +22,7 @@ import torch.nn.functional as F
 from torch import nn
 from torch_geometric.nn.resolver import aggregation_resolver
 
-from garsim.model.config import GarSimConfig
+from garsim.model.config import FABRIC_FEATURES, GarSimConfig
 from garsim.model.encoders import MLP, activation
 
 
@@ -124,10 +124,15 @@ class MessagePassingStep(nn.Module):
         edge_index: torch.Tensor,
         mean: MeanAggregator | None = None,
         own_edge: bool = False,
+        film: torch.Tensor | None = None,
     ) -> tuple[torch.Tensor, torch.Tensor]:
-        """One step; ``own_edge`` lets inference (no grad) update ``edge`` in place."""
+        """One step; ``own_edge`` lets inference (no grad) update ``edge`` in place; ``film`` (N, 2 * edge_latent)
+        per-node scale and shift of the edge update, applied at each edge's sender."""
         senders, receivers = edge_index[0], edge_index[1]
         new_edge = self.edge_update(edge, node, senders, receivers)
+        if film is not None:
+            scale, shift = film.index_select(0, senders).chunk(2, dim=-1)
+            new_edge = new_edge * (1.0 + scale) + shift
         if self.mean:
             agg = (mean or MeanAggregator(receivers, node.shape[0]))(new_edge)
         else:
@@ -149,9 +154,20 @@ class Processor(nn.Module):
         n_blocks = 1 if (cfg.share_weights and cfg.num_steps > 0) else cfg.num_steps
         self.steps = nn.ModuleList([MessagePassingStep(cfg) for _ in range(n_blocks)])
         self.mean = cfg.aggregation == "mean"
+        # FiLM from the fabric's physical values: zero-initialised, so training starts from the plain processor
+        self.film = nn.ModuleList([nn.Linear(FABRIC_FEATURES, 2 * cfg.edge_latent) for _ in range(n_blocks)]) \
+            if cfg.fabric_film else None
+        if self.film is not None:
+            for lin in self.film:
+                nn.init.zeros_(lin.weight)
+                nn.init.zeros_(lin.bias)
 
-    def forward(self, node: torch.Tensor, edge: torch.Tensor, edge_index: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    def forward(
+        self, node: torch.Tensor, edge: torch.Tensor, edge_index: torch.Tensor, fabric: torch.Tensor | None = None
+    ) -> tuple[torch.Tensor, torch.Tensor]:
         mean = MeanAggregator(edge_index[1], node.shape[0]) if (self.mean and self.num_steps > 0) else None
         for l in range(self.num_steps):
-            node, edge = self.steps[l % len(self.steps)](node, edge, edge_index, mean, own_edge=l > 0)
+            block = l % len(self.steps)
+            film = self.film[block](fabric) if (self.film is not None and fabric is not None) else None
+            node, edge = self.steps[block](node, edge, edge_index, mean, own_edge=l > 0, film=film)
         return node, edge
