@@ -10,7 +10,8 @@ from typing import Any
 import numpy as np
 
 from garsim.bodies.prior import mesh_pair_prior
-from garsim.data.sample import FABRICS, Sample
+from garsim.data.sample import CUSTOM_FABRIC, FABRICS, Sample
+from garsim.garments.fabrics import Fabric, fabric_from_values, get_fabric
 from garsim.garments.garment import Garment
 from garsim.garments.remesh import BarycentricMap, barycentric_map, decimate, transfer_barycentric
 from garsim.geometry.cache import ContentCache, content_key
@@ -38,17 +39,36 @@ def _pinned_mask(pinned: Any, n: int) -> np.ndarray:
     return mask
 
 
+def fabric_fields(fabric: Any) -> tuple[str, dict[str, float] | None]:
+    """(name, physical values or None) of a fabric given as a preset name, a ``Fabric`` or a dict of
+    physical values (``bending`` N·m, ``density`` kg/m², ``stretch`` N/m, ...)."""
+    if isinstance(fabric, str):
+        if fabric.strip().lower() not in FABRICS:
+            raise ValueError(f"unknown fabric {fabric!r}; choose one of {', '.join(FABRICS)} or give physical values")
+        return fabric.strip().lower(), None
+    if isinstance(fabric, dict):
+        try:
+            fabric = fabric_from_values(dict(fabric))
+        except TypeError as exc:
+            raise ValueError(f"fabric values must be bending, density, stretch (and optional friction, "
+                             f"damping, thickness): {exc}") from None
+    if isinstance(fabric, Fabric):
+        return (fabric.name, None) if fabric.name in FABRICS and fabric == get_fabric(fabric.name) \
+            else (CUSTOM_FABRIC, fabric.values())
+    raise ValueError(f"fabric must be a preset name ({', '.join(FABRICS)}), a Fabric or a dict of physical values, "
+                     f"got {type(fabric).__name__}")
+
+
 def make_sample(
     body_canonical: Any,
     body_target: Any,
     garment: Any,
-    fabric: str = "cotton",
+    fabric: Any = "cotton",
     pinned: Any = None,
     garment_type: str = "unknown",
 ) -> Sample:
     """Validate user meshes and build the model's input record (with the garment prior)."""
-    if fabric not in FABRICS:
-        raise ValueError(f"unknown fabric {fabric!r}; choose one of {', '.join(FABRICS)}")
+    fabric_name, fabric_values = fabric_fields(fabric)
     bc, bf = as_mesh(body_canonical, "canonical body")
     bt, bf_t = as_mesh(body_target, "target body")
     g, gf = as_mesh(garment, "garment")
@@ -66,7 +86,8 @@ def make_sample(
         garment_faces=gf,
         pinned=_pinned_mask(pinned, len(g)),
         prior=prior,
-        fabric=fabric,
+        fabric=fabric_name,
+        fabric_values=fabric_values,
         garment_type=garment_type,
     )
 
@@ -89,15 +110,14 @@ class GarSim:
     """
 
     def __init__(
-        self, model: Any = None, collision_margin: float | None = 0.002, max_vertices: int | None = 400
+        self, model: Any = None, collision_margin: float | None = 0.002, max_vertices: int | None = None
     ) -> None:
         """``collision_margin`` (metres): predicted vertices inside the target body, or nearer than
-        this, are pushed out along the nearest body normal (None keeps the raw network output).
-        ``max_vertices``: a denser garment is draped by the network at about this many vertices and
-        its correction to the prior is carried back to every vertex barycentrically; None runs the
-        network on the garment as given. The shipped model was trained at ~230 and 800 vertices; on
-        the 800-vertex test garments, carrying back from 250-400 vertices is more accurate than
-        running it at 800 (examples/resolution_transfer.py: 17.6-17.8 mm vs 18.6 mm)."""
+        this, are pushed out along the body's blended normal at their soft anchor (None keeps the raw
+        network output). ``max_vertices``: a denser garment is draped by the network at about this many
+        vertices (decimated) and its correction to the prior carried back barycentrically; None (the
+        default) runs the network on the garment as given. Decimation depends on the vertex and face
+        order and on tiny changes of the input, so it is off unless asked for."""
         if collision_margin is not None and not (0.0 <= collision_margin < 0.05):
             raise ValueError(f"collision_margin is in metres, in [0, 0.05), got {collision_margin}")
         if max_vertices is not None and max_vertices < 100:
@@ -170,15 +190,16 @@ class GarSim:
         except FileNotFoundError:
             return cls.prior_only()
 
-    def drape_on(self, body: Any, canonical: Any, target: Any, garment: Any, fabric: str = "cotton") -> np.ndarray:
+    def drape_on(self, body: Any, canonical: Any, target: Any, garment: Any, fabric: Any = "cotton") -> np.ndarray:
         """Drape a ``Garment`` using a rigged ``BodyModel`` and its posed bodies (exact LBS prior)."""
         from garsim.bodies.prior import garment_prior
 
         prior = garment_prior(body, canonical, target, garment.vertices)
+        fabric_name, fabric_values = fabric_fields(fabric)
         sample = Sample(
             body_canonical=canonical.vertices, body_target=target.vertices, body_faces=body.faces,
             garment=garment.vertices, garment_faces=garment.faces, pinned=garment.pinned, prior=prior,
-            fabric=fabric, garment_type=garment.kind,
+            fabric=fabric_name, fabric_values=fabric_values, garment_type=garment.kind,
         )
         return self.predict(sample)
 
@@ -187,12 +208,13 @@ class GarSim:
         body_canonical: Any,
         body_target: Any,
         garment: Any,
-        fabric: str = "cotton",
+        fabric: Any = "cotton",
         pinned: Any = None,
     ) -> np.ndarray:
         """Predicted garment vertices (N, 3) on ``body_target``.
 
         Each mesh is a ``trimesh.Trimesh``, a ``(vertices, faces)`` pair of arrays or a file path;
-        both bodies share one topology; ``garment`` is draped on ``body_canonical``.
+        both bodies share one topology; ``garment`` is draped on ``body_canonical``. ``fabric`` is a
+        preset name (silk, cotton, denim, leather), a ``Fabric`` or a dict of physical values.
         """
         return self.predict(make_sample(body_canonical, body_target, garment, fabric, pinned))

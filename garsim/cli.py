@@ -107,17 +107,16 @@ def cmd_train(args: argparse.Namespace) -> int:
 
     train, val = train_val_samples(args.data, resolution=args.resolution, val_every=args.val_every)
     init = GarSimModel.load(args.init) if args.init else None
+    given = {"epochs": args.epochs, "batch_size": args.batch_size, "lr": args.lr, "seed": args.seed,
+             "threads": args.threads}
+    losses = {"col": args.collision_weight, "eps": args.collision_eps}
     cfg = TrainConfig(
         out_dir=args.out,
-        epochs=args.epochs,
-        batch_size=args.batch_size,
-        lr=args.lr,
-        seed=args.seed,
         collision_start_epoch=args.collision_start,
-        losses=LossWeights(col=args.collision_weight, eps=args.collision_eps),
+        losses=LossWeights(**{k: v for k, v in losses.items() if v is not None}),
         progress=not args.quiet,
         resume=not args.restart,
-        threads=args.threads,
+        **{k: v for k, v in given.items() if v is not None},
     )
     print(f"training on {len(train)} samples, validating on {len(val)} ({args.resolution} resolution)")
     if int(os.environ.get("RANK", "0")) == 0:  # record which sequences this run saw (the store may grow later)
@@ -204,20 +203,21 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("train", help="train GarSim on a generated dataset (resumable; torchrun for DDP)")
     p.add_argument("--data", required=True, help="dataset folder made by `garsim data generate`")
     p.add_argument("--out", required=True, help="run folder: checkpoints, CSV log, best model")
-    p.add_argument("--epochs", type=int, default=30)
-    p.add_argument("--batch-size", type=int, default=4)
-    p.add_argument("--lr", type=float, default=1e-3)
-    p.add_argument("--seed", type=int, default=0)
+    # unset values take TrainConfig's / LossWeights' defaults (garsim/train), declared once there
+    p.add_argument("--epochs", type=int)
+    p.add_argument("--batch-size", type=int)
+    p.add_argument("--lr", type=float)
+    p.add_argument("--seed", type=int)
     p.add_argument("--resolution", choices=("low", "full", "both"), default="low",
                    help="train on the ~4x decimated meshes (the paper's choice), the full ones, or both")
     p.add_argument("--val-every", type=int, default=10, help="hold out every N-th training sequence")
     p.add_argument("--collision-start", type=int, default=None,
                    help="epoch that switches the collision loss on (default: when validation plateaus)")
-    p.add_argument("--collision-weight", type=float, default=1.0, help="α_col of Eq. 7 (the paper: 1)")
-    p.add_argument("--collision-eps", type=float, default=0.004, help="ε of Eq. 6 in metres (margin kept off the body)")
+    p.add_argument("--collision-weight", type=float, help="α_col of Eq. 7 (the paper: 1)")
+    p.add_argument("--collision-eps", type=float, help="ε of Eq. 6 in metres (margin kept off the body)")
     p.add_argument("--init", help="start from this trained model folder's weights (fine-tuning)")
     p.add_argument("--restart", action="store_true", help="ignore an existing checkpoint in --out")
-    p.add_argument("--threads", type=int, default=1, help="torch threads per process")
+    p.add_argument("--threads", type=int, help="torch threads per process")
     p.add_argument("--quiet", action="store_true")
     p.set_defaults(func=cmd_train)
 

@@ -13,9 +13,13 @@ def test_data_info_and_verify(tmp_path, capsys):
 
     store = DatasetStore(tmp_path)
     store.append_manifest(store.write_sequence(make_record("s0")))
-    assert main(["data", "info", str(tmp_path)]) == 0
+    assert main(["data", "info", str(tmp_path), "--json"]) == 0
     info = json.loads(capsys.readouterr().out)
-    assert info["sequences"] == 1 and info["frames"] == 3
+    assert info["sequences"] == 1 and info["samples"] == 3
+    assert main(["data", "info", str(tmp_path)]) == 0
+    assert "3 samples" in capsys.readouterr().out
+    assert main(["data", "info", str(tmp_path / "nothing")]) != 0
+    assert "not a garsim dataset" in capsys.readouterr().err
     assert main(["data", "verify", str(tmp_path)]) == 0
     path = tmp_path / "sequences/s0.npz"
     path.write_bytes(path.read_bytes()[:100])

@@ -54,9 +54,15 @@ def test_info_counts(tmp_path):
     for i, split in enumerate(["train", "train", "test"]):
         store.append_manifest(store.write_sequence(make_record(f"s{i}", split, k=2 + i, seed=i)))
     info = store.info()
-    assert info["sequences"] == 3 and info["frames"] == 2 + 3 + 4
-    assert info["frames_by"]["split=train"] == 5 and info["sequences_by"]["split=test"] == 1
+    assert info["sequences"] == 3 and info["samples"] == 2 + 3 + 4 and info["garment_instances"] == 3
+    assert info["samples_by"]["split=train"] == 5 and info["sequences_by"]["split=test"] == 1
+    assert info["per_family"]["skirt"]["jobs"] == 3 and info["per_family"]["skirt"]["acceptance_rate"] == 1.0
     assert info["bytes"] == sum((tmp_path / e["file"]).stat().st_size for e in store.entries())
+
+
+def test_info_refuses_a_folder_that_is_not_a_dataset(tmp_path):
+    with pytest.raises(StoreError, match="not a garsim dataset"):
+        DatasetStore(tmp_path).info()
 
 
 def test_resume_skips_done_and_rejected_and_torn_line(tmp_path):
@@ -101,3 +107,86 @@ def test_export_subset(tmp_path):
     assert recs[0].frames.tolist() == full.frames[-2:].tolist() and sub.verify() == []
     with pytest.raises(StoreError, match="no sequences"):
         src.export_subset(tmp_path / "x", ["nope"])
+
+
+def _store_with(tmp_path, n: int = 3) -> DatasetStore:
+    store = DatasetStore(tmp_path)
+    for i in range(n):
+        store.append_manifest(store.write_sequence(make_record(f"s{i}", seed=i)))
+    return store
+
+
+def test_verify_reports_a_truncated_body_faces_file_and_goes_on(tmp_path):
+    store = _store_with(tmp_path)
+    faces = next((tmp_path / "body_faces").iterdir())
+    faces.write_bytes(faces.read_bytes()[:-7])
+    p2 = tmp_path / "sequences/s2.npz"
+    p2.write_bytes(p2.read_bytes()[:-10])
+    problems = store.verify()
+    assert len(problems) == 2, problems  # the shared faces file once, then the truncated sample
+    assert faces.name in problems[0] and "truncated or corrupt" in problems[0]
+    assert "s2.npz: truncated" in problems[1]
+    with pytest.raises(StoreError, match=faces.name):
+        store.read_sequence(store.entries()[0])
+
+
+def test_verify_reports_corrupt_body_faces(tmp_path):
+    store = _store_with(tmp_path, 1)
+    faces = next((tmp_path / "body_faces").iterdir())
+    faces.write_bytes(b"garbage, not an npy file")
+    assert len(problems := store.verify()) == 1 and faces.name in problems[0] and "corrupt" in problems[0]
+    np.save(faces, np.array([[0, 1, 2], [1, 3, 2], [4, 5, 7]]))  # loads, but not the faces it was named after
+    assert len(problems := store.verify()) == 1 and f"{faces.name}: checksum mismatch" in problems[0]
+
+
+def test_verify_reports_manifest_lines_with_missing_keys(tmp_path):
+    import json
+
+    store = _store_with(tmp_path)
+    lines = (tmp_path / "manifest.jsonl").read_text().splitlines()
+    e0, e1 = json.loads(lines[0]), json.loads(lines[1])
+    del e0["file"], e1["sha256"]
+    lines[0], lines[1] = json.dumps(e0), json.dumps(e1)
+    (tmp_path / "manifest.jsonl").write_text("\n".join(lines) + "\n")
+    problems = store.verify()
+    assert any("line 1" in p and "'s0'" in p and "missing keys ['file']" in p for p in problems), problems
+    assert any("line 2" in p and "'s1'" in p and "missing keys ['sha256']" in p for p in problems), problems
+    assert any(p.startswith("orphan") and "s0.npz" in p for p in problems), problems  # no line lists s0.npz now
+    assert not any("s2" in p for p in problems)
+    with pytest.raises(StoreError, match="lacks keys"):
+        store.read_sequence(e0)
+
+
+def test_verify_reports_an_unreadable_sample_file(tmp_path):
+    import hashlib
+    import json
+
+    store = _store_with(tmp_path)
+    p1 = tmp_path / "sequences/s1.npz"
+    junk = b"PK\x03\x04" + bytes(range(256)) * 8  # a zip signature, then garbage
+    p1.write_bytes(junk)
+    lines = (tmp_path / "manifest.jsonl").read_text().splitlines()
+    e1 = json.loads(lines[1])  # as if the sample had been written corrupt: sizes and checksum match the junk
+    e1.update(bytes=len(junk), sha256=hashlib.sha256(junk).hexdigest())
+    lines[1] = json.dumps(e1)
+    (tmp_path / "manifest.jsonl").write_text("\n".join(lines) + "\n")
+    problems = store.verify()
+    assert len(problems) == 1 and "s1.npz is truncated or corrupt" in problems[0], problems
+    assert "\n" not in problems[0]
+
+
+def test_verify_reports_torn_lines_and_orphans_and_everything_else(tmp_path):
+    store = _store_with(tmp_path)
+    rec = make_record("s3", seed=3)
+    store.write_sequence(rec)  # a killed run: the file is written, its manifest line never appended
+    with open(tmp_path / "manifest.jsonl", "a") as fh:
+        fh.write("[1, 2]\n")
+        fh.write('{"id": "s4", "fi')  # an interrupted append
+    (tmp_path / "sequences/s0.npz").unlink()
+    problems = store.verify()
+    assert len(problems) == 4, problems
+    assert "s0.npz: missing" in problems[0]
+    assert "line 4" in problems[1] and "not a JSON object" in problems[1]
+    assert "line 5" in problems[2] and "torn" in problems[2]
+    assert problems[3].startswith("orphan") and "s3.npz" in problems[3]
+    assert [e["id"] for e in store.entries()] == ["s0", "s1", "s2"]  # readers skip what verify reports

@@ -119,7 +119,7 @@ def test_model_size_small():
 
 def _end_to_end(model, can, tgt, garment, faces, pinned, weights, body_faces):
     """Meshes in memory -> predicted vertices: weight transfer + LBS prior + graph + forward."""
-    w = transfer_weights(garment, can.vertices, weights, k=4)
+    w = transfer_weights(garment, can.vertices, weights)
     prior = lbs_prior(garment, w, can.transforms, tgt.transforms)
     s = Sample(can.vertices, tgt.vertices, body_faces, garment, faces, pinned, prior, "cotton", "skirt")
     return model.predict(s)

@@ -5,7 +5,6 @@ import pytest
 import torch
 from model_fixtures import make_sample, rot_z, transform_sample
 
-from garsim.data.sample import FABRICS
 from garsim.geometry.mesh import face_pairs
 from garsim.model.config import GarSimConfig
 from garsim.model.inputs import body_yaw_frame, build_graph, collate, semantic_vector
@@ -16,29 +15,60 @@ def sample():
     return make_sample(n_around=16, n_down=5, fabric="denim", pose_id=2)
 
 
+def _anchor_weights(points: np.ndarray, body: np.ndarray, width: float = 0.04) -> np.ndarray:
+    """Brute-force dense soft-anchor weights (N, V): (1 - (d^2 - dmin^2) / width^2)_+^2, rows normalised."""
+    d2 = ((points[:, None, :].astype(np.float64) - body[None].astype(np.float64)) ** 2).sum(-1)
+    w = np.clip(1.0 - (d2 - d2.min(axis=1, keepdims=True)) / width**2, 0.0, None) ** 2
+    return w / w.sum(axis=1, keepdims=True)
+
+
 def test_eq2_quantities_match_brute_force(sample):
     cfg = GarSimConfig(canonicalize_yaw=False)
     g = build_graph(sample, cfg)
     G, B, Bt, P = sample.garment, sample.body_canonical, sample.body_target, sample.prior
-    d2 = ((G[:, None, :].astype(np.float64) - B[None]) ** 2).sum(-1)
-    q = d2.argmin(axis=1)
-    assert np.array_equal(g.q.numpy(), q)
-    np.testing.assert_allclose(g.p.numpy(), G - B[q], atol=1e-6)
-    np.testing.assert_allclose(g.p_prior.numpy(), P - Bt[q], atol=1e-6)
-    np.testing.assert_allclose(g.delta.numpy(), Bt[q] - B[q], atol=1e-6)
+    w = _anchor_weights(G, B)
+    bq, bq_t = w @ B, w @ Bt
+    np.testing.assert_allclose(g.p.numpy(), G - bq, atol=1e-6)
+    np.testing.assert_allclose(g.p_prior.numpy(), P - bq_t, atol=1e-6)
+    np.testing.assert_allclose(g.delta.numpy(), bq_t - bq, atol=1e-6)
+    rows, slots = g.anchor_index.numpy()
+    dense = np.zeros((len(G), g.body_rel.shape[0]))
+    dense[rows, slots] = g.anchor_weight.numpy()
+    np.testing.assert_allclose(dense.sum(axis=1), 1.0, atol=1e-6)
+    assert (w > 0).sum() == len(rows)  # exactly the body vertices with a positive weight
     s, r = g.edge_index.numpy()
     np.testing.assert_allclose(g.edge_attr.numpy()[:, :3], G[r] - G[s], atol=1e-6)
     np.testing.assert_allclose(g.edge_attr.numpy()[:, 3:], P[r] - P[s], atol=1e-6)
     assert g.edge_index.shape[1] == 2 * (16 * 5 + 2 * 16 * 4)  # rings + verticals + diagonals, both ways
-    onehot = np.zeros(len(FABRICS))
-    onehot[FABRICS.index("denim")] = 1
-    assert (g.fabric.numpy() == onehot).all()
+    # denim on the silk (0) .. leather (1) log scales of bending, density, stretch
+    from garsim.garments.fabrics import FABRICS as PRESETS
+
+    expect = [(np.log(getattr(PRESETS["denim"], k)) - np.log(getattr(PRESETS["silk"], k)))
+              / (np.log(getattr(PRESETS["leather"], k)) - np.log(getattr(PRESETS["silk"], k)))
+              for k in ("bending", "density", "stretch")]
+    np.testing.assert_allclose(g.fabric.numpy(), np.tile(expect, (len(G), 1)), atol=1e-6)
     assert g.pinned.sum() == 16
-    # geometry-encoder neighbourhoods: self first (zero), then the true nearest garment vertices
-    knn = np.sort(np.sqrt(((G[:, None] - G[None]) ** 2).sum(-1)), axis=1)[:, : cfg.knn_garment]
-    np.testing.assert_allclose(np.linalg.norm(g.gar_rel.numpy(), axis=-1), knn, atol=1e-6)
+    # geometry-encoder neighbourhoods: self first (zero), then mesh neighbours only (edge lengths)
+    rel = g.gar_rel.numpy()
+    np.testing.assert_allclose(rel[:, 0], 0.0)
+    lengths = {round(float(np.linalg.norm(G[a] - G[b])), 5) for a, b in zip(s, r)} | {0.0}
+    assert {round(float(x), 5) for x in np.linalg.norm(rel, axis=-1).ravel()} <= lengths
     np.testing.assert_allclose(g.body_rel.numpy()[:, 0], 0.0)
     assert np.array_equal(g.face_pairs.numpy(), face_pairs(sample.garment_faces))
+
+
+def test_anchor_weights_are_continuous_where_the_nearest_vertex_jumps():
+    """Half-way between two body points the hard nearest vertex flips; the soft anchor blends both."""
+    from garsim.geometry.proximity import soft_anchor
+
+    body = np.array([[-0.1, 0, 0], [0.1, 0, 0], [0.0, 0.5, 0]])
+    xs = np.linspace(-1e-4, 1e-4, 5)
+    pts = np.stack([xs, np.zeros(5), np.full(5, 0.05)], axis=1)
+    w = soft_anchor(pts, body).toarray()
+    np.testing.assert_allclose(w[2], [0.5, 0.5, 0.0])
+    assert (np.diff(w[:, 0]) < 0).all() and np.abs(np.diff(w[:, 0])).max() < 0.02  # no jump at the medial plane
+    far = soft_anchor(np.array([[0.5, 0, 0]]), body).toarray()[0]
+    assert far.tolist() == [0.0, 1.0, 0.0]  # a clear nearest vertex alone carries the weight
 
 
 def test_yaw_frame_commutes_with_rotation(sample):
@@ -54,15 +84,19 @@ def test_inputs_invariant_to_yaw_and_translation(sample):
     g0 = build_graph(sample)
     moved = transform_sample(sample, rot_z(-2.0), np.array([0.4, 0.3, -0.2]))
     g1 = build_graph(moved)
-    for key in ("p", "p_prior", "delta", "edge_attr", "gar_rel", "body_rel", "sem"):
+    for key in ("p", "p_prior", "delta", "edge_attr", "sem", "anchor_weight", "anchor_index"):
         np.testing.assert_allclose(getattr(g1, key).numpy(), getattr(g0, key).numpy(), atol=5e-5, err_msg=key)
+    for key in ("gar_rel", "body_rel"):  # neighbourhoods: the same point sets (the encoder max-pools, order-free)
+        a, b = (np.sort(np.round(getattr(x, key).numpy(), 4).view([("", "f4")] * 3)[..., 0], axis=1) for x in (g1, g0))
+        assert np.array_equal(a, b), key
 
 
 def test_semantic_vectors(sample):
     cfg_v = GarSimConfig(semantic="vertex", num_body_vertices=len(sample.body_canonical))
     g = build_graph(sample, cfg_v)
     mask = g.sem.numpy()[0]
-    assert set(np.flatnonzero(mask)) == set(g.q.numpy().tolist())
+    w = _anchor_weights(sample.garment, sample.body_canonical)
+    np.testing.assert_allclose(mask, w.max(axis=0), atol=1e-6)  # each body vertex's largest anchor weight
     with pytest.raises(ValueError, match="semantic='grid'"):
         build_graph(sample, GarSimConfig(semantic="vertex", num_body_vertices=6890))
     grid = build_graph(sample).sem.numpy()[0].reshape(8, 4, 16)
@@ -108,21 +142,22 @@ def test_body_rings_and_caches_follow_content():
     verts = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0], [2, 0, 0]], dtype=np.float32)
     faces = np.array([[0, 1, 2], [0, 2, 3], [1, 4, 2]])
     ring = body_frame(verts, faces, canonicalize_yaw=False).ring(4)
-    assert ring.tolist() == [[0, 1, 2, 3], [1, 0, 2, 4], [2, 0, 1, 3], [3, 0, 2, 3], [4, 1, 2, 4]]
-    # cut to the lowest-index neighbours when the ring is larger than k - 1; padded with self
-    assert body_frame(verts, faces, canonicalize_yaw=False).ring(3)[0].tolist() == [0, 1, 2]
+    # nearest neighbours first (ties by index), padded with self
+    assert ring.tolist() == [[0, 1, 3, 2], [1, 0, 2, 4], [2, 1, 3, 0], [3, 0, 2, 3], [4, 1, 2, 4]]
+    # cut to the nearest neighbours when the ring is larger than k - 1
+    assert body_frame(verts, faces, canonicalize_yaw=False).ring(3)[0].tolist() == [0, 1, 3]
     # the cache is keyed by content: edited vertices or faces give a new frame, never a stale one
     moved = verts.copy()
     moved[4] = [3, 0, 0]
     assert body_frame(moved, faces, False) is not body_frame(verts, faces, False)
     assert body_frame(verts, faces[:2], False).ring(4)[4].tolist() == [4, 4, 4, 4]
-    knn, ei = garment_topology(verts, faces, 2)
-    assert knn[:, 0].tolist() == [0, 1, 2, 3, 4]
+    ring2, ei = garment_topology(verts, faces, 2)
+    assert ring2[:, 0].tolist() == [0, 1, 2, 3, 4]
     assert (np.diff(ei[1]) >= 0).all() and ei.shape == (2, 2 * 7)  # receiver-sorted, 7 edges both ways
-    assert knn[4, 1] == 1
+    assert ring2[4, 1] == 1
     other = verts.copy()
-    other[4] = [0, 2, 0]  # now nearest to vertex 3: the cached answer must not be reused
-    assert garment_topology(other, faces, 2)[0][4, 1] == 3
+    other[4] = [1, 1.5, 0]  # now nearer to its neighbour 2: the cached answer must not be reused
+    assert garment_topology(other, faces, 2)[0][4, 1] == 2
 
 
 def test_collision_normals_equal_full_vertex_normals(sample):

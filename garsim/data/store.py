@@ -32,10 +32,16 @@ from garsim.data.sample import Sample
 MANIFEST = "manifest.jsonl"
 REJECTED = "rejected.jsonl"
 RESOLUTIONS = ("full", "low")
+ENTRY_KEYS = ("id", "file", "sha256", "bytes", "split", "garment_type", "fabric", "body_faces")
+"""Keys every manifest line must hold for its sequence to be read and verified."""
 
 
 class StoreError(RuntimeError):
     """A dataset folder or file is missing, truncated or corrupt."""
+
+
+def _one_line(exc: BaseException) -> str:
+    return " ".join(str(exc).split())
 
 
 @dataclass
@@ -149,16 +155,19 @@ class DatasetStore:
 
     # -- reading -------------------------------------------------------------------------
     def entries(self, name: str = MANIFEST) -> list[dict[str, Any]]:
-        """Manifest entries; a torn last line (interrupted append) is ignored."""
+        """Manifest entries; a torn line (interrupted append) or a line that is not a JSON object is
+        ignored here (``verify`` reports them)."""
         path = self.root / name
         if not path.exists():
             return []
         out = []
-        for line in path.read_text(encoding="utf-8").splitlines():
+        for line in path.read_text(encoding="utf-8", errors="replace").splitlines():
             try:
-                out.append(json.loads(line))
+                entry = json.loads(line)
             except json.JSONDecodeError:
                 continue
+            if isinstance(entry, dict):
+                out.append(entry)
         return out
 
     def done_ids(self) -> set[str]:
@@ -169,38 +178,54 @@ class DatasetStore:
         path = self.root / "body_faces" / f"{key}.npy"
         if not path.exists():
             raise StoreError(f"{path} is missing: the dataset folder is incomplete, regenerate it")
-        return np.load(path, allow_pickle=False)
+        try:
+            faces = np.load(path, allow_pickle=False)
+        except Exception as exc:  # noqa: BLE001 - a bad .npy header raises ValueError, TokenError, SyntaxError, ...
+            raise StoreError(f"{path} is truncated or corrupt ({type(exc).__name__}: {_one_line(exc)})") from None
+        if faces.ndim != 2 or faces.shape[1] != 3 or faces.dtype.kind not in "iu":
+            raise StoreError(f"{path} is corrupt: body faces must be an (F, 3) integer array, "
+                             f"got {faces.dtype} {faces.shape}")
+        return faces
 
     def read_sequence(self, entry: dict[str, Any]) -> SequenceRecord:
+        missing = [k for k in ENTRY_KEYS if k not in entry]
+        if missing:
+            raise StoreError(f"{self.root / MANIFEST}: entry {entry.get('id', '?')!r} lacks keys {missing}")
         path = self.root / entry["file"]
         try:
             with np.load(path, allow_pickle=False) as z:
                 arrays = {k: z[k] for k in z.files}
         except FileNotFoundError:
             raise StoreError(f"{path} is listed in the manifest but missing") from None
-        except Exception as exc:  # zipfile/zlib/ValueError on truncated or corrupt files
-            raise StoreError(f"{path} is truncated or corrupt ({type(exc).__name__}: {exc})") from None
-        meta = json.loads(arrays.pop("meta").tobytes().decode())
-        levels = {
-            res: GarmentLevel(
-                template=arrays[f"{res}/template"],
-                faces=arrays[f"{res}/faces"],
-                pinned=arrays[f"{res}/pinned"],
-                priors=arrays[f"{res}/priors"],
-                targets=arrays[f"{res}/targets"],
-            )
-            for res in RESOLUTIONS
-            if f"{res}/template" in arrays
-        }
+        except Exception as exc:  # noqa: BLE001 - a damaged zip raises BadZipFile, zlib.error, NotImplementedError, ...
+            raise StoreError(f"{path} is truncated or corrupt ({type(exc).__name__}: {_one_line(exc)})") from None
+        try:
+            meta = json.loads(arrays.pop("meta").tobytes().decode())
+            levels = {
+                res: GarmentLevel(
+                    template=arrays[f"{res}/template"],
+                    faces=arrays[f"{res}/faces"],
+                    pinned=arrays[f"{res}/pinned"],
+                    priors=arrays[f"{res}/priors"],
+                    targets=arrays[f"{res}/targets"],
+                )
+                for res in RESOLUTIONS
+                if f"{res}/template" in arrays
+            }
+            body_canonical, body_targets, frames = arrays["body_canonical"], arrays["body_targets"], arrays["frames"]
+        except KeyError as exc:
+            raise StoreError(f"{path} is corrupt: it lacks the array {exc.args[0]!r}") from None
+        except (UnicodeDecodeError, ValueError) as exc:
+            raise StoreError(f"{path} is corrupt: unreadable metadata ({type(exc).__name__}: {_one_line(exc)})") from None
         return SequenceRecord(
             seq_id=entry["id"],
             split=entry["split"],
             garment_type=entry["garment_type"],
             fabric=entry["fabric"],
-            body_canonical=arrays["body_canonical"],
-            body_targets=arrays["body_targets"],
+            body_canonical=body_canonical,
+            body_targets=body_targets,
             body_faces=self._faces(entry["body_faces"]),
-            frames=arrays["frames"],
+            frames=frames,
             levels=levels,
             meta=meta,
         )
@@ -310,23 +335,69 @@ class DatasetStore:
         }
 
     def verify(self) -> list[str]:
-        """Problems found (empty when the store is sound): missing, truncated or corrupt files."""
-        if not (self.root / MANIFEST).exists():
-            return [f"{self.root / MANIFEST} not found: not a garsim dataset folder"]
-        problems = []
-        for e in self.entries():
+        """Problems found (empty when the store is sound), one line each naming the file: torn or incomplete
+        manifest lines, missing, truncated or corrupt sample and body-faces files, and orphans (sample files
+        that no manifest line lists, e.g. left by a killed run). Every problem is reported, not just the first."""
+        manifest = self.root / MANIFEST
+        if not manifest.exists():
+            return [f"{manifest} not found: not a garsim dataset folder"]
+        problems: list[str] = []
+        listed: set[Path] = set()
+        faces_checked: set[str] = set()
+        lines = manifest.read_text(encoding="utf-8", errors="replace").splitlines()
+        for lineno, line in enumerate(lines, 1):
+            where = f"{manifest} line {lineno}"
+            if not line.strip():
+                continue
+            try:
+                e = json.loads(line)
+            except json.JSONDecodeError as exc:
+                kind = "torn (an interrupted append?)" if lineno == len(lines) else "not valid JSON"
+                problems.append(f"{where}: {kind}: {exc.msg} at column {exc.colno}")
+                continue
+            if not isinstance(e, dict):
+                problems.append(f"{where}: not a JSON object ({type(e).__name__})")
+                continue
+            where += f" (id {e['id']!r})" if "id" in e else ""
+            missing = [k for k in ENTRY_KEYS if k not in e]
+            if missing:
+                problems.append(f"{where}: missing keys {missing}")
+            key = e.get("body_faces")
+            if isinstance(key, str) and key not in faces_checked:  # each body topology once
+                faces_checked.add(key)
+                try:
+                    if faces_key(self._faces(key)) != key:
+                        problems.append(f"{self.root / 'body_faces' / key}.npy: checksum mismatch (corrupt)")
+                except StoreError as exc:
+                    problems.append(str(exc))
+            if not isinstance(e.get("file"), str):
+                if "file" in e:
+                    problems.append(f"{where}: 'file' is not a path: {e['file']!r}")
+                continue
             path = self.root / e["file"]
-            if not path.exists():
+            listed.add(path.resolve())
+            if not path.is_file():
                 problems.append(f"{path}: missing")
                 continue
-            data = path.read_bytes()
-            if len(data) != e["bytes"]:
-                problems.append(f"{path}: truncated ({len(data)} of {e['bytes']} bytes)")
-            elif hashlib.sha256(data).hexdigest() != e["sha256"]:
+            try:
+                data = path.read_bytes()
+            except OSError as exc:
+                problems.append(f"{path}: unreadable ({type(exc).__name__}: {_one_line(exc)})")
+                continue
+            if isinstance(e.get("bytes"), int) and len(data) != e["bytes"]:
+                kind = "truncated" if len(data) < e["bytes"] else "longer than listed"
+                problems.append(f"{path}: {kind} ({len(data)} of {e['bytes']} bytes)")
+            elif "sha256" in e and hashlib.sha256(data).hexdigest() != e["sha256"]:
                 problems.append(f"{path}: checksum mismatch (corrupt)")
-            else:
+            elif not missing:
                 try:
                     self.read_sequence(e)
                 except StoreError as exc:
                     problems.append(str(exc))
-        return problems
+        seq_dir = self.root / "sequences"
+        if seq_dir.is_dir():
+            for path in sorted(seq_dir.iterdir()):
+                if path.is_file() and path.resolve() not in listed:
+                    problems.append(f"orphan: {path}: in sequences/ but listed by no line of {MANIFEST} "
+                                    "(left by an interrupted run?)")
+        return list(dict.fromkeys(problems))  # a shared corrupt body-faces file is reported once

@@ -169,7 +169,7 @@ def bench_newton(
     from garsim.bodies.poses import pose_sequence
     from garsim.garments.templates import make_garment
     from garsim.geometry.skinning import dense_weights, lbs_prior, transfer_weights
-    from garsim.physics.newton_sim import SimConfig, settle, simulate_motion
+    from garsim.physics.newton_sim import SimConfig, settle, simulate_poses
 
     body = body if body is not None else AnnyBody({})
     canonical = body.canonical()
@@ -181,13 +181,15 @@ def bench_newton(
         g = make_garment(garment, body, target_vertices=int(n))
         template, _ = settle(g, canonical.vertices, body.faces, fabric, SimConfig(max_settle_frames=30))
         pins = np.flatnonzero(g.pinned)
-        w = transfer_weights(template[pins], canonical.vertices, body_w, k=4)
+        w = transfer_weights(template[pins], canonical.vertices, body_w)
         pin_targets = np.stack([lbs_prior(template[pins], w, canonical.transforms, t) for t in transforms])
-        (out, info), wall, cpu = _timed(
-            lambda: simulate_motion(template, g.faces, g.pinned, frames, body.faces, pin_targets, fabric)
+        (_, infos), wall, cpu = _timed(
+            lambda: simulate_poses(template, g.faces, g.pinned, [frames], body.faces, [pin_targets], [fabric])
         )
+        info = infos[-1]
         results[int(n)] = {"vertices": int(len(g.vertices)), "wall_ms": wall, "cpu_ms": cpu,
-                           "frames": int(len(out)), "settled": bool(info["settled"])}
+                           "frames": int(info["motion_frames"] + info.get("hold_frames", 0)),
+                           "settled": bool(info.get("settled"))}
     return results
 
 

@@ -80,8 +80,8 @@ class Fabric:
 FABRICS: dict[str, Fabric] = {
     "silk": Fabric("silk", bending=0.02 * GF_CM2_PER_CM, density=0.07, stretch=3.0e3, friction=0.3),
     "cotton": Fabric("cotton", bending=0.12 * GF_CM2_PER_CM, density=0.15, stretch=5.0e3, friction=0.5),
-    "denim": Fabric("denim", bending=1.5 * GF_CM2_PER_CM, density=0.42, stretch=1.0e4, friction=0.6),
-    "leather": Fabric("leather", bending=12.0 * GF_CM2_PER_CM, density=0.9, stretch=2.0e4, friction=0.7),
+    "denim": Fabric("denim", bending=3.0 * GF_CM2_PER_CM, density=0.42, stretch=1.0e4, friction=0.6),
+    "leather": Fabric("leather", bending=50.0 * GF_CM2_PER_CM, density=0.9, stretch=2.0e4, friction=0.7),
 }
 """The presets (see the module docstring for their sources), in ``PRESET_NAMES`` order."""
 

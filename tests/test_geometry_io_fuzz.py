@@ -1,0 +1,195 @@
+"""Property-based fuzzing of mesh input: every malformed file or array ends in a one-line MeshError
+(never another exception type), or loads as a valid mesh."""
+
+from __future__ import annotations
+
+import math
+import tempfile
+from pathlib import Path
+
+import numpy as np
+import pytest
+import trimesh
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+from hypothesis.extra import numpy as hnp
+
+from garsim.geometry.io import MeshError, as_mesh, load_mesh, save_mesh, validate_mesh
+
+FUZZ = settings(max_examples=120, deadline=None, suppress_health_check=[HealthCheck.too_slow], derandomize=True)
+EXTENSIONS = (".obj", ".ply", ".glb", ".gltf", ".off", ".stl")
+_DIR = Path(tempfile.mkdtemp(prefix="garsim-io-fuzz-"))  # hypothesis re-runs a test body: no function fixtures
+
+
+def _valid_obj_text() -> str:
+    m = trimesh.creation.icosphere(subdivisions=1)
+    lines = [f"v {x:.6f} {y:.6f} {z:.6f}" for x, y, z in m.vertices]
+    lines += [f"f {a + 1} {b + 1} {c + 1}" for a, b, c in m.faces]
+    return "\n".join(lines) + "\n"
+
+
+VALID_OBJ = _valid_obj_text()
+
+
+def _write(data: bytes | str, ext: str) -> Path:
+    path = _DIR / f"fuzz{ext}"
+    path.write_bytes(data.encode() if isinstance(data, str) else data)
+    return path
+
+
+def _is_valid(v: np.ndarray, f: np.ndarray) -> None:
+    assert v.dtype == np.float32 and v.ndim == 2 and v.shape[1] == 3 and len(v) > 0
+    assert np.isfinite(v).all()
+    assert f.dtype == np.int64 and f.ndim == 2 and f.shape[1] == 3 and len(f) > 0
+    assert f.min() >= 0 and f.max() < len(v)
+    assert ((f[:, 0] != f[:, 1]) & (f[:, 1] != f[:, 2]) & (f[:, 2] != f[:, 0])).all()
+
+
+def _load_or_mesh_error(path: Path) -> tuple[np.ndarray, np.ndarray] | MeshError:
+    """load_mesh's result, checked valid, or its MeshError (one line, naming the file); anything else fails."""
+    try:
+        v, f = load_mesh(path)
+    except MeshError as exc:
+        msg = str(exc)
+        assert msg and "\n" not in msg and path.name in msg, msg
+        return exc
+    _is_valid(v, f)
+    return v, f
+
+
+def _call_or_mesh_error(fn, *args) -> tuple[np.ndarray, np.ndarray] | MeshError:
+    try:
+        v, f = fn(*args)
+    except MeshError as exc:
+        assert str(exc) and "\n" not in str(exc), str(exc)
+        return exc
+    _is_valid(v, f)
+    return v, f
+
+
+@FUZZ
+@given(data=st.binary(max_size=2048), ext=st.sampled_from(EXTENSIONS))
+def test_random_bytes(data, ext):
+    _load_or_mesh_error(_write(data, ext))
+
+
+@FUZZ
+@given(head=st.sampled_from([b"ply\n", b"glTF", b"solid x\n", b"OFF\n", b"v 0 0 0\n", b"\x00" * 80]),
+       data=st.binary(max_size=1024), ext=st.sampled_from(EXTENSIONS))
+def test_random_bytes_after_a_plausible_header(head, data, ext):
+    _load_or_mesh_error(_write(head + data, ext))
+
+
+@pytest.fixture(scope="module")
+def valid_files(icosphere) -> dict[str, bytes]:
+    v, f = icosphere
+    return {ext: save_mesh(_DIR / f"valid{ext}", v[:42] if False else v, f).read_bytes()
+            for ext in (".obj", ".ply", ".glb", ".off", ".stl")}
+
+
+@FUZZ
+@given(cut=st.floats(0.0, 1.0), ext=st.sampled_from((".obj", ".ply", ".glb", ".off", ".stl")))
+def test_valid_files_truncated_anywhere(valid_files, cut, ext):
+    data = valid_files[ext]
+    _load_or_mesh_error(_write(data[: int(cut * len(data))], ext))
+
+
+@FUZZ
+@given(cut=st.integers(1, len(VALID_OBJ) - 1))
+def test_obj_cut_mid_line_is_reported_as_truncated(cut):
+    text = VALID_OBJ[:cut]
+    out = _load_or_mesh_error(_write(text, ".obj"))
+    last = text.rsplit("\n", 1)[-1].split()
+    incomplete = bool(last) and ((last[0] == "v" and len(last) < 4) or (last[0] == "f" and len(last) < 4))
+    if incomplete:
+        assert isinstance(out, MeshError) and "truncated" in str(out), (text[-40:], out)
+
+
+@FUZZ
+@given(flips=st.lists(st.tuples(st.integers(0, 10**9), st.integers(1, 255)), min_size=1, max_size=8),
+       ext=st.sampled_from((".obj", ".ply", ".glb", ".off", ".stl")))
+def test_valid_files_with_flipped_bytes(valid_files, flips, ext):
+    data = bytearray(valid_files[ext])
+    for pos, mask in flips:
+        data[pos % len(data)] ^= mask
+    _load_or_mesh_error(_write(bytes(data), ext))
+
+
+_NUMBER = st.one_of(
+    st.floats(allow_nan=True, allow_infinity=True),
+    st.sampled_from(["nan", "inf", "-inf", "1e400", "-0", "1e-400", "0x1p3", "", "1.2.3", "--1", "NaN"]),
+)
+_INDEX = st.one_of(
+    st.integers(-(10**30), 10**30),
+    st.sampled_from(["0", "-1", "-4", "99999999999999999999", "1/", "1//2", "/1", "a", "1.5", "", "-0"]),
+)
+
+
+@FUZZ
+@given(
+    verts=st.lists(st.lists(_NUMBER, min_size=0, max_size=5), min_size=0, max_size=6),
+    faces=st.lists(st.lists(_INDEX, min_size=0, max_size=5), min_size=0, max_size=5),
+    newline=st.booleans(),
+)
+def test_obj_with_odd_coordinates_and_indices(verts, faces, newline):
+    lines = ["v " + " ".join(str(x) for x in row) for row in verts]
+    lines += ["f " + " ".join(str(i) for i in row) for row in faces]
+    _load_or_mesh_error(_write("\n".join(lines) + ("\n" if newline else ""), ".obj"))
+
+
+@FUZZ
+@given(bad=st.sampled_from([math.nan, math.inf, -math.inf]), row=st.integers(0, 2), col=st.integers(0, 2),
+       index=st.sampled_from([-10**12, -4, -1, 3, 4, 2**31, 2**63 - 1, 10**12]))
+def test_nan_coordinates_and_huge_or_negative_indices(bad, row, col, index):
+    v = np.array([[0.0, 0, 0], [1, 0, 0], [0, 1, 0]])
+    f = np.array([[0, 1, 2]])
+    vb = v.copy()
+    vb[row, col] = bad
+    assert isinstance(_call_or_mesh_error(validate_mesh, vb, f), MeshError)
+    fb = f.copy()
+    fb[0, col] = index
+    assert isinstance(_call_or_mesh_error(validate_mesh, v, fb), MeshError)
+    assert isinstance(_call_or_mesh_error(as_mesh, (v, fb)), MeshError)
+    text = "v 0 0 0\nv 1 0 0\nv 0 1 0\nf " + " ".join(str(int(i) + 1) for i in fb[0]) + "\n"
+    _load_or_mesh_error(_write(text, ".obj"))
+
+
+def test_empty_files_and_obj_with_only_vertices():
+    for ext in EXTENSIONS:
+        assert isinstance(_load_or_mesh_error(_write(b"", ext)), MeshError)
+    out = _load_or_mesh_error(_write("v 0 0 0\nv 1 0 0\nv 0 1 0\n", ".obj"))
+    assert isinstance(out, MeshError) and "no triangle faces" in str(out)
+
+
+_DTYPES = st.sampled_from([np.float64, np.float32, np.float16, np.int64, np.int32, np.uint8, np.bool_, np.complex64,
+                           np.dtype("U3"), np.dtype("datetime64[s]"), object])
+
+
+@st.composite
+def _arrays(draw):
+    dtype = draw(_DTYPES)
+    shape = draw(hnp.array_shapes(min_dims=0, max_dims=3, min_side=0, max_side=5))
+    if dtype is object:
+        return np.array([draw(st.one_of(st.none(), st.integers(), st.floats(), st.text(max_size=2)))
+                         for _ in range(int(np.prod(shape)))], dtype=object).reshape(shape)
+    return draw(hnp.arrays(np.dtype(dtype), shape))
+
+
+_ODD = st.one_of(_arrays(), st.none(), st.integers(), st.floats(), st.text(max_size=4),
+                 st.lists(st.lists(st.one_of(st.integers(-5, 5), st.floats()), max_size=4), max_size=4))
+
+
+@FUZZ
+@given(vertices=_ODD, faces=_ODD)
+def test_arrays_of_wrong_shapes_and_dtypes(vertices, faces):
+    _call_or_mesh_error(validate_mesh, vertices, faces)
+    _call_or_mesh_error(as_mesh, (vertices, faces))
+
+
+@FUZZ
+@given(faces=hnp.arrays(st.sampled_from([np.int64, np.int32, np.float64]), hnp.array_shapes(min_dims=2, max_dims=2,
+                                                                                               max_side=6),
+                        elements=st.integers(-3, 5)))
+def test_small_valid_vertices_random_faces(faces):
+    v = np.array([[0.0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1], [1, 1, 1]])
+    _call_or_mesh_error(validate_mesh, v, faces)
