@@ -4,6 +4,8 @@
 from __future__ import annotations
 
 import math
+import re
+import shutil
 import tempfile
 from pathlib import Path
 
@@ -19,6 +21,12 @@ from garsim.geometry.io import MeshError, as_mesh, load_mesh, save_mesh, validat
 FUZZ = settings(max_examples=120, deadline=None, suppress_health_check=[HealthCheck.too_slow], derandomize=True)
 EXTENSIONS = (".obj", ".ply", ".glb", ".gltf", ".off", ".stl")
 _DIR = Path(tempfile.mkdtemp(prefix="garsim-io-fuzz-"))  # hypothesis re-runs a test body: no function fixtures
+
+
+@pytest.fixture(scope="module", autouse=True)
+def _cleanup():
+    yield
+    shutil.rmtree(_DIR, ignore_errors=True)
 
 
 def _valid_obj_text() -> str:
@@ -74,8 +82,11 @@ def test_random_bytes(data, ext):
 
 
 @FUZZ
-@given(head=st.sampled_from([b"ply\n", b"glTF", b"solid x\n", b"OFF\n", b"v 0 0 0\n", b"\x00" * 80]),
-       data=st.binary(max_size=1024), ext=st.sampled_from(EXTENSIONS))
+@given(
+    head=st.sampled_from([b"ply\n", b"glTF", b"solid x\n", b"OFF\n", b"v 0 0 0\n", b"\x00" * 80]),
+    data=st.binary(max_size=1024),
+    ext=st.sampled_from(EXTENSIONS),
+)
 def test_random_bytes_after_a_plausible_header(head, data, ext):
     _load_or_mesh_error(_write(head + data, ext))
 
@@ -83,8 +94,7 @@ def test_random_bytes_after_a_plausible_header(head, data, ext):
 @pytest.fixture(scope="module")
 def valid_files(icosphere) -> dict[str, bytes]:
     v, f = icosphere
-    return {ext: save_mesh(_DIR / f"valid{ext}", v[:42] if False else v, f).read_bytes()
-            for ext in (".obj", ".ply", ".glb", ".off", ".stl")}
+    return {ext: save_mesh(_DIR / f"valid{ext}", v, f).read_bytes() for ext in (".obj", ".ply", ".glb", ".off", ".stl")}
 
 
 @FUZZ
@@ -106,8 +116,10 @@ def test_obj_cut_mid_line_is_reported_as_truncated(cut):
 
 
 @FUZZ
-@given(flips=st.lists(st.tuples(st.integers(0, 10**9), st.integers(1, 255)), min_size=1, max_size=8),
-       ext=st.sampled_from((".obj", ".ply", ".glb", ".off", ".stl")))
+@given(
+    flips=st.lists(st.tuples(st.integers(0, 10**9), st.integers(1, 255)), min_size=1, max_size=8),
+    ext=st.sampled_from((".obj", ".ply", ".glb", ".off", ".stl")),
+)
 def test_valid_files_with_flipped_bytes(valid_files, flips, ext):
     data = bytearray(valid_files[ext])
     for pos, mask in flips:
@@ -138,8 +150,12 @@ def test_obj_with_odd_coordinates_and_indices(verts, faces, newline):
 
 
 @FUZZ
-@given(bad=st.sampled_from([math.nan, math.inf, -math.inf]), row=st.integers(0, 2), col=st.integers(0, 2),
-       index=st.sampled_from([-10**12, -4, -1, 3, 4, 2**31, 2**63 - 1, 10**12]))
+@given(
+    bad=st.sampled_from([math.nan, math.inf, -math.inf]),
+    row=st.integers(0, 2),
+    col=st.integers(0, 2),
+    index=st.sampled_from([-(10**12), -4, -1, 3, 4, 2**31, 2**63 - 1, 10**12]),
+)
 def test_nan_coordinates_and_huge_or_negative_indices(bad, row, col, index):
     v = np.array([[0.0, 0, 0], [1, 0, 0], [0, 1, 0]])
     f = np.array([[0, 1, 2]])
@@ -161,8 +177,21 @@ def test_empty_files_and_obj_with_only_vertices():
     assert isinstance(out, MeshError) and "no triangle faces" in str(out)
 
 
-_DTYPES = st.sampled_from([np.float64, np.float32, np.float16, np.int64, np.int32, np.uint8, np.bool_, np.complex64,
-                           np.dtype("U3"), np.dtype("datetime64[s]"), object])
+_DTYPES = st.sampled_from(
+    [
+        np.float64,
+        np.float32,
+        np.float16,
+        np.int64,
+        np.int32,
+        np.uint8,
+        np.bool_,
+        np.complex64,
+        np.dtype("U3"),
+        np.dtype("datetime64[s]"),
+        object,
+    ]
+)
 
 
 @st.composite
@@ -170,26 +199,102 @@ def _arrays(draw):
     dtype = draw(_DTYPES)
     shape = draw(hnp.array_shapes(min_dims=0, max_dims=3, min_side=0, max_side=5))
     if dtype is object:
-        return np.array([draw(st.one_of(st.none(), st.integers(), st.floats(), st.text(max_size=2)))
-                         for _ in range(int(np.prod(shape)))], dtype=object).reshape(shape)
+        return np.array(
+            [
+                draw(st.one_of(st.none(), st.integers(), st.floats(), st.text(max_size=2)))
+                for _ in range(int(np.prod(shape)))
+            ],
+            dtype=object,
+        ).reshape(shape)
     return draw(hnp.arrays(np.dtype(dtype), shape))
 
 
-_ODD = st.one_of(_arrays(), st.none(), st.integers(), st.floats(), st.text(max_size=4),
-                 st.lists(st.lists(st.one_of(st.integers(-5, 5), st.floats()), max_size=4), max_size=4))
+_ODD = st.one_of(
+    _arrays(),
+    st.none(),
+    st.integers(),
+    st.floats(),
+    st.text(max_size=4),
+    st.lists(st.lists(st.one_of(st.integers(-5, 5), st.floats()), max_size=4), max_size=4),
+)
+
+
+V3 = np.array([[0.0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]])
+F3 = np.array([[0, 1, 2], [0, 2, 3]])
+
+
+@st.composite
+def _rows_of_three(draw):
+    """(n, 3) arrays of any dtype: they get past the shape checks, so the dtype handling is what is tested."""
+    dtype = draw(_DTYPES)
+    n = draw(st.integers(1, 4))
+    if dtype is object:
+        values = st.one_of(st.none(), st.integers(-(10**20), 10**20), st.floats(), st.text(max_size=2))
+        return np.array([draw(values) for _ in range(3 * n)], dtype=object).reshape(n, 3)
+    return draw(hnp.arrays(np.dtype(dtype), (n, 3)))
 
 
 @FUZZ
-@given(vertices=_ODD, faces=_ODD)
+@given(vertices=st.one_of(_ODD, _rows_of_three()), faces=st.one_of(_ODD, _rows_of_three()))
 def test_arrays_of_wrong_shapes_and_dtypes(vertices, faces):
-    _call_or_mesh_error(validate_mesh, vertices, faces)
-    _call_or_mesh_error(as_mesh, (vertices, faces))
+    for v, f in ((vertices, faces), (V3, faces), (vertices, F3)):
+        _call_or_mesh_error(validate_mesh, v, f)
+        _call_or_mesh_error(as_mesh, (v, f))
+
+
+@pytest.mark.parametrize(
+    ("vertices", "faces", "pattern"),
+    [
+        (V3, np.array([["0", "1", "2"]]), "integers"),  # leaked TypeError from np.isfinite
+        (V3, np.array([[0, 1, 2]], dtype="datetime64[s]"), "integers"),  # leaked TypeError from np.round
+        (V3, np.array([[True, False, True]]), "integers"),
+        (V3, np.array([[0, 1, 2]], dtype=complex), "integers"),  # the imaginary part was dropped silently
+        (V3 + 1j, F3, "real numbers"),
+        (np.zeros((3, 3), dtype="datetime64[s]"), [[0, 1, 2]], "real numbers"),
+        (V3 * 1e300, F3, "float32 range"),  # became inf after the float32 cast
+        (V3, np.array([[0, 1, 1e300]]), "outside"),  # was wrapped to -2**63 by the int64 cast
+        (V3, np.array([[0, 1, 2**64 - 1]], dtype=np.uint64), r"outside .* 18446744073709551615"),
+        (V3, np.array([[0, 1, None]], dtype=object), "integers"),
+        (V3, [[0, 1, 2], [0, 1]], "not an integer"),
+    ],
+)
+def test_array_regressions_found_by_fuzzing(vertices, faces, pattern):
+    with pytest.raises(MeshError, match=pattern):
+        validate_mesh(vertices, faces)
+
+
+def test_unreadable_paths_are_mesh_errors():
+    for path in ("bad\x00name.obj", str(_DIR / ("x" * 300 + ".obj"))):  # a NUL byte, a name too long for the OS
+        with pytest.raises(MeshError, match="name.obj|xxx"):
+            load_mesh(path)
+        with pytest.raises(MeshError):
+            as_mesh(path)
+
+
+@pytest.mark.parametrize(
+    ("text", "pattern"),
+    [
+        ("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\nv 1 1", "truncated"),
+        ("v 0 0 0\nv 1 0 0\nv 0 1 0\nv 1 1 0\nf 1 2 3\nf 2 4", "truncated"),
+        ("v 0 0 0\nv 1 0 0\nv 0 1 -", "truncated"),
+        ("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\nv", "truncated"),
+        ("v 0 0 0\nv 1 0\nv 0 1 0\nv 1 1 1\nf 1 2 3\n", "line 2 .* malformed"),  # trimesh read (V, 2) vertices
+        ("v 0 0 0\nv 1 0 0\nv 0 1 0\nv 1 1 0\nf 2 4\nf 1 2 3\n", "line 5 .* malformed"),  # trimesh dropped it
+    ],
+)
+def test_incomplete_obj_lines(text, pattern):
+    out = _load_or_mesh_error(_write(text, ".obj"))
+    assert isinstance(out, MeshError) and re.search(pattern, str(out)), out
 
 
 @FUZZ
-@given(faces=hnp.arrays(st.sampled_from([np.int64, np.int32, np.float64]), hnp.array_shapes(min_dims=2, max_dims=2,
-                                                                                               max_side=6),
-                        elements=st.integers(-3, 5)))
+@given(
+    faces=hnp.arrays(
+        st.sampled_from([np.int64, np.int32, np.float64]),
+        hnp.array_shapes(min_dims=2, max_dims=2, max_side=6),
+        elements=st.integers(-3, 5),
+    )
+)
 def test_small_valid_vertices_random_faces(faces):
     v = np.array([[0.0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1], [1, 1, 1]])
     _call_or_mesh_error(validate_mesh, v, faces)

@@ -13,7 +13,15 @@ from garsim.model.garsim import CHECKSUM_KEY, CONFIG_FILE, WEIGHTS_FILE, GarSimM
 from garsim.model.inputs import build_graph
 
 FIXTURE = Path(__file__).parent / "fixtures" / "dataset"
-SMALL = {"latent": 16, "edge_latent": 8, "mlp_hidden": 16, "geo_hidden": 8, "geo_out": 8, "semantic_dim": 8, "num_steps": 2}
+SMALL = {
+    "latent": 16,
+    "edge_latent": 8,
+    "mlp_hidden": 16,
+    "geo_hidden": 8,
+    "geo_out": 8,
+    "semantic_dim": 8,
+    "num_steps": 2,
+}
 
 
 @pytest.fixture()

@@ -288,28 +288,31 @@ class DatasetStore:
         groups: dict[str, set[str]] = {}
         for e in paired:
             groups.setdefault(e["job"], set()).add(e.get("fabric_name", e["fabric"]))
-        jobs_by_family: dict[str, set[str]] = {}
+        # acceptance per family: settled states stored / states attempted (every copy's chain of targets)
+        attempted: Counter[str] = Counter()
+        stored: Counter[str] = Counter()
         cpu: Counter[str] = Counter()
-        stored_samples: Counter[str] = Counter()
-        for e in entries + rejected:
-            fam = e.get("garment_type", e.get("family", "?"))
-            jobs_by_family.setdefault(fam, set())
-            cpu[fam] += float(e.get("cpu_seconds", 0.0))
-        accepted_jobs: dict[str, set[str]] = {}
-        for e in entries:
-            accepted_jobs.setdefault(e["garment_type"], set()).add(e.get("job", e["id"]))
-            stored_samples[e["garment_type"]] += e["num_frames"]
-        for e in entries + rejected:
-            jobs_by_family[e.get("garment_type", e.get("family", "?"))].add(e.get("job", e["id"]))
+        jobs: dict[str, set[str]] = {}
+        stored_by_id = {e["id"]: e for e in entries}
+        rejected_by_id = {e["id"]: e for e in rejected}
+        for cid in stored_by_id.keys() | rejected_by_id.keys():
+            e, rej = stored_by_id.get(cid), rejected_by_id.get(cid)
+            fam = (e or rej).get("garment_type", (e or rej).get("family", "?"))
+            jobs.setdefault(fam, set()).add((e or rej).get("job", cid))
+            n_stored = e["num_frames"] if e else 0
+            attempted[fam] += rej.get("targets", n_stored + 1) if rej else n_stored
+            stored[fam] += n_stored
+            cpu[fam] += float((e or rej).get("cpu_seconds", 0.0))
         per_family = {
             fam: {
-                "jobs": len(jobs),
-                "accepted_jobs": len(accepted_jobs.get(fam, ())),
-                "acceptance_rate": round(len(accepted_jobs.get(fam, ())) / max(len(jobs), 1), 3),
+                "jobs": len(jobs[fam]),
+                "settled_samples": stored[fam],
+                "states_attempted": attempted[fam],
+                "acceptance_rate": round(stored[fam] / max(attempted[fam], 1), 3),
                 "cpu_seconds": round(cpu[fam], 1),
-                "cpu_seconds_per_settled_sample": round(cpu[fam] / max(stored_samples[fam], 1), 2),
+                "cpu_seconds_per_settled_sample": round(cpu[fam] / max(stored[fam], 1), 2),
             }
-            for fam, jobs in sorted(jobs_by_family.items())
+            for fam in sorted(jobs)
         }
         verts = [e["num_vertices"]["full"] for e in entries if "num_vertices" in e]
         phen = [e["phenotype"] for e in entries if "phenotype" in e]

@@ -19,12 +19,17 @@ Preset values (bending rigidity converted with 1 gf·cm²/cm = 9.81e-5 N·m):
   0.005-0.05 gf·cm²/cm, cottons at 0.05-0.2, and heavy denims at 0.5-3 gf·cm²/cm.
 - Wang, O'Brien & Ramamoorthi, "Data-driven elastic models for cloth" (SIGGRAPH 2011) measured ten
   fabrics with bending stiffnesses spanning about two orders of magnitude, denim at the top.
-- Garment (nappa/lamb) leather of 0.6-1 mm is an order stiffer than denim (~1e-3 N·m; cantilever
-  tests after Peirce 1930, "The handle of cloth as a measurable quantity").
+- Garment leather of 0.6-1.2 mm is one to two orders stiffer than denim (1e-3 to 1e-2 N·m; cantilever
+  tests after Peirce 1930, "The handle of cloth as a measurable quantity"); the preset takes 5e-3 N·m.
 Areal densities are typical weights: silk habotai ~60-80 g/m², cotton poplin/jersey 120-180 g/m²,
 denim 12-14 oz/yd² (400-480 g/m²), garment leather 0.8-1.0 kg/m².
 Membrane stiffness barely changes a drape under self-weight (strain ~1e-4 for any value in 1e3..3e4
 N/m, measured): it is kept high enough that VBD holds the stretch check (edges <= 1.5x rest).
+
+Measured (tests/test_physics_newton_sim.py, a 400-vertex flared skirt settled once in cotton, then held
+in each preset until its speed fell below 5 mm/s): mean distance to the body 44.0 / 44.0 / 44.4 / 46.0 mm
+and mean fold angle 21.7 / 21.7 / 21.2 / 19.4 degrees, silk to leather. With real bending values the
+light fabrics differ in their folds (on a fine mesh), the stiff ones a little in their silhouette.
 """
 
 from __future__ import annotations

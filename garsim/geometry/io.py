@@ -29,6 +29,7 @@ import numpy as np
 
 from garsim.atomic import atomic_write_bytes
 from garsim.geometry.cache import ContentCache, content_key
+
 SUPPORTED_EXTENSIONS: tuple[str, ...] = (".obj", ".ply", ".glb", ".gltf", ".off", ".stl")
 """File types :func:`load_mesh` reads; :func:`save_mesh` writes all but ``.gltf``."""
 
@@ -65,48 +66,75 @@ def triangulate_polygons(faces: np.ndarray) -> np.ndarray:
     return np.stack(fans, axis=1).reshape(-1, 3)
 
 
+def _first_line(exc: BaseException) -> str:
+    text = str(exc).strip()
+    return text.splitlines()[0] if text else type(exc).__name__
+
+
+def _as_array(x: Any, name: str, what: str) -> np.ndarray:
+    """``np.asarray`` that turns ragged or unconvertible input into a MeshError."""
+    try:
+        return np.asarray(x)
+    except (TypeError, ValueError, OverflowError) as exc:
+        raise MeshError(f"{name}: {what} ({_first_line(exc)})") from None
+
+
 def validate_mesh(vertices: Any, faces: Any, name: str = "mesh") -> tuple[np.ndarray, np.ndarray]:
     """Check and normalise a triangle mesh -> (float32 (V, 3) vertices, int64 (F, 3) faces).
 
     Raises :class:`MeshError` naming ``name`` for: no vertices/faces, wrong shapes, NaN/inf
     coordinates, out-of-range indices, degenerate faces. ``(F, k > 3)`` polygons are fan-triangulated.
     """
+    raw = _as_array(vertices, name, "vertices are not a numeric (V, 3) array")
+    if raw.dtype.kind not in "biufO":  # complex, dates, strings: nothing to measure in metres
+        raise MeshError(f"{name}: vertices must be real numbers, got dtype {raw.dtype}")
     try:
-        v = np.asarray(vertices, dtype=np.float64)
-    except (TypeError, ValueError) as exc:
-        raise MeshError(f"{name}: vertices are not a numeric (V, 3) array ({exc})") from None
+        v = raw.astype(np.float64)
+    except (TypeError, ValueError, OverflowError) as exc:
+        raise MeshError(f"{name}: vertices are not a numeric (V, 3) array ({_first_line(exc)})") from None
     if v.size == 0:
         raise MeshError(f"{name}: the mesh has no vertices; check the file is a non-empty triangle mesh")
     if v.ndim != 2 or v.shape[1] != 3:
         raise MeshError(f"{name}: vertices must have shape (V, 3), got {v.shape}")
-    bad = ~np.isfinite(v).all(axis=1)
+    with np.errstate(over="ignore", invalid="ignore"):  # float32 overflow is reported as inf just below
+        bad = ~np.isfinite(v.astype(np.float32)).all(axis=1)
     if bad.any():
         first = np.flatnonzero(bad)[:5].tolist()
         raise MeshError(
-            f"{name}: {int(bad.sum())} vertices have NaN/inf coordinates (first indices {first}); "
-            "fix or remove them before loading"
+            f"{name}: {int(bad.sum())} vertices have NaN/inf coordinates (or beyond float32 range; first indices "
+            f"{first}); fix or remove them before loading"
         )
-    try:
-        f = np.asarray(faces)
-    except (TypeError, ValueError) as exc:
-        raise MeshError(f"{name}: faces are not an integer (F, 3) array ({exc})") from None
+    f = _as_array(faces, name, "faces are not an integer (F, 3) array")
     if f.size == 0:
         raise MeshError(f"{name}: the mesh has no faces (a point cloud?); garsim needs a triangle mesh")
-    if f.dtype == object or f.ndim != 2:
-        raise MeshError(f"{name}: faces must be an (F, 3) integer array (mixed polygon sizes are not supported), got shape {f.shape}")
-    if not np.issubdtype(f.dtype, np.integer):
-        if not np.all(np.isfinite(f)) or not np.all(f == np.round(f)):
-            raise MeshError(f"{name}: face indices must be integers")
-    f = f.astype(np.int64)
+    if f.ndim != 2:
+        raise MeshError(
+            f"{name}: faces must be an (F, 3) integer array (mixed polygon sizes are not supported), got shape {f.shape}"
+        )
+    if f.dtype == object:  # e.g. Python ints in an object array; None or text is not an index
+        try:
+            f = f.astype(np.float64)
+        except (TypeError, ValueError, OverflowError):
+            raise MeshError(f"{name}: face indices must be integers, got {f.dtype} values") from None
+    if f.dtype.kind not in "iuf":  # bool, complex, dates, strings
+        raise MeshError(f"{name}: face indices must be integers, got dtype {f.dtype}")
+    if f.dtype.kind == "f" and (not np.all(np.isfinite(f)) or not np.all(f == np.round(f))):
+        raise MeshError(f"{name}: face indices must be integers")
     if f.shape[1] < 3:
         raise MeshError(f"{name}: faces must have at least 3 corners, got shape {f.shape}")
-    oob = (f < 0) | (f >= len(v))
+    oob = (f < 0) | (f >= len(v))  # before the int64 cast, so huge indices are not wrapped
     if oob.any():
         rows = np.flatnonzero(oob.any(axis=1))
+        first = (
+            [int(i) if abs(i) < 2**63 else i for i in f[rows[0]].tolist()]
+            if f.dtype.kind == "f"
+            else f[rows[0]].tolist()
+        )
         raise MeshError(
             f"{name}: {len(rows)} faces reference vertices outside [0, {len(v) - 1}] (first face {int(rows[0])}: "
-            f"{f[rows[0]].tolist()}); the face indices do not match the vertex list"
+            f"{first}); the face indices do not match the vertex list"
         )
+    f = f.astype(np.int64)
     f = triangulate_polygons(f)
     repeated = (f[:, 0] == f[:, 1]) | (f[:, 1] == f[:, 2]) | (f[:, 2] == f[:, 0])
     if repeated.any():
@@ -135,13 +163,79 @@ def _check_path(path: str | os.PathLike, writing: bool) -> tuple[Path, str]:
         verb = "write" if writing else "read"
         raise MeshError(f"{p}: cannot {verb} {ext or 'files without an extension'!r}; use one of {', '.join(allowed)}")
     if not writing:
-        if not p.exists():
-            raise MeshError(f"{p}: no such file")
-        if p.is_dir():
-            raise MeshError(f"{p}: is a directory, expected a mesh file")
-        if p.stat().st_size == 0:
-            raise MeshError(f"{p}: the file is empty; re-export the mesh")
+        try:
+            if not p.exists():
+                raise MeshError(f"{p}: no such file")
+            if p.is_dir():
+                raise MeshError(f"{p}: is a directory, expected a mesh file")
+            if p.stat().st_size == 0:
+                raise MeshError(f"{p}: the file is empty; re-export the mesh")
+        except (OSError, ValueError) as exc:  # permissions, a NUL byte or an over-long name
+            if isinstance(exc, MeshError):
+                raise
+            raise MeshError(f"{p!s:.200}: cannot read the file ({_first_line(exc)})") from None
     return p, ext
+
+
+_OBJ_NEEDS = {b"v": "3 coordinates", b"vn": "3 normal components", b"f": "3 vertex indices"}
+
+
+def _numbers(fields: list[bytes]) -> bool:
+    try:
+        [float(x) for x in fields]
+    except ValueError:
+        return False
+    return True
+
+
+def _obj_candidate_lines(data: bytes) -> np.ndarray:
+    """Start offsets of the lines worth a closer look: 'v' / 'vn' / 'f' lines with fewer than 4 tokens or a
+    comment, and the last line. Vectorised (a few ms for a 100k-line file; a Python loop over every line
+    would add a third to trimesh's own parse time)."""
+    a = np.frombuffer(data, dtype=np.uint8)
+    starts = np.concatenate(([0], np.flatnonzero(a == 10) + 1))
+    starts = starts[starts < len(a)]
+    space = (a == 32) | ((a >= 9) & (a <= 13))
+    token_start = ~space & np.concatenate(([True], space[:-1]))
+    tokens = np.add.reduceat(token_start.astype(np.int32), starts)
+    comment = np.add.reduceat((a == 35).astype(np.int32), starts) > 0
+    first, second = a[starts], a[np.minimum(starts + 1, len(a) - 1)]
+    vf = ((first == ord("v")) & (second != ord("t")) & (second != ord("p"))) | (first == ord("f"))
+    pick = vf & ((tokens < 4) | comment)
+    pick[-1] = True
+    return starts[pick]
+
+
+def _check_obj_lines(p: Path) -> None:
+    """Refuse OBJ 'v' / 'vn' / 'f' lines with fewer than 3 fields, which trimesh would silently drop or misread.
+
+    An incomplete last line (too few fields, or a number cut short) means the file was cut off: the message
+    says it is truncated."""
+    try:
+        data = p.read_bytes().rstrip()
+    except OSError as exc:
+        raise MeshError(f"{p}: cannot read the file ({_first_line(exc)})") from None
+    if not data:
+        return
+    for start in _obj_candidate_lines(data).tolist():
+        end = data.find(b"\n", start)
+        is_last = end < 0
+        line = data[start:] if is_last else data[start:end]
+        fields = (line.split(b"#", 1)[0] if b"#" in line else line).split()
+        kind = fields[0] if fields else b""
+        if kind not in _OBJ_NEEDS:  # vt, vp, ...
+            continue
+        if len(fields) >= 4 and (not is_last or kind == b"f" or _numbers(fields[1:4])):
+            continue
+        n = data.count(b"\n", 0, start) + 1
+        shown = line.decode("utf-8", errors="replace").strip()[:60]
+        need = _OBJ_NEEDS[kind]
+        if is_last:
+            raise MeshError(
+                f"{p}: the file is truncated: its last line {n} {shown!r} is incomplete "
+                f"(a '{kind.decode()}' line needs {need}); re-export the mesh"
+            )
+        raise MeshError(f"{p}: line {n} {shown!r} is malformed: a '{kind.decode()}' line needs {need}")
 
 
 def load_mesh(path: str | os.PathLike, y_up: bool = False) -> tuple[np.ndarray, np.ndarray]:
@@ -154,10 +248,11 @@ def load_mesh(path: str | os.PathLike, y_up: bool = False) -> tuple[np.ndarray, 
     p, ext = _check_path(path, writing=False)
     kwargs: dict[str, Any] = {"process": False}
     if ext == ".obj":
+        _check_obj_lines(p)
         kwargs.update(maintain_order=True, skip_materials=True)
     try:
         loaded = trimesh.load(str(p), force="mesh", **kwargs)
-    except Exception as exc:  # trimesh raises many types on malformed files
+    except Exception as exc:  # noqa: BLE001 - trimesh raises many types on malformed files
         detail = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
         if isinstance(exc, IndexError):
             detail += " (faces reference vertices that do not exist)"

@@ -412,7 +412,8 @@ def _run_one(args: tuple[JobSpec, GenerateConfig]) -> dict[str, Any]:
                           "traceback": traceback.format_exc(limit=5)}}
     cpu = (time.process_time() - c0) / max(len(job.fabrics), 1)
     for r in rejections:
-        r.update(family=job.family, construction=job.construction, split=job.split, cpu_seconds=round(cpu, 2),
+        r.update(family=job.family, construction=job.construction, split=job.split, targets=len(job.pose_modes),
+                 cpu_seconds=round(cpu, 2) if r["accepted"] == 0 else 0.0,  # a stored copy carries its own time
                  seconds=round((time.perf_counter() - t0) / len(job.fabrics), 2))
     return {"entries": entries, "rejections": rejections}
 
@@ -472,9 +473,8 @@ def generate(config: GenerateConfig, progress: bool = True) -> dict[str, Any]:
                 store.append_manifest(entry)
                 summary["stored"] += 1
                 summary["seconds"].append(entry["seconds"])
-            for rej in result["rejections"]:
-                if rej["accepted"] == 0:  # a copy with some accepted states is stored; its rest is only logged
-                    store.append_manifest(rej, REJECTED)
+            for rej in result["rejections"]:  # ``accepted`` > 0: the copy's states before the failing one are stored
+                store.append_manifest(rej, REJECTED)
                 summary["rejected"][rej["reason"]] = summary["rejected"].get(rej["reason"], 0) + 1
                 log.info("rejected %s: %s", rej["id"], rej["detail"].splitlines()[0])
             bar.set_postfix(stored=summary["stored"], rejected=sum(summary["rejected"].values()))
