@@ -98,3 +98,18 @@ def test_total_is_weighted_sum_and_per_graph_mean():
     total.backward()
     assert torch.isfinite(pred.grad).all() and pred.grad.abs().sum() > 0
     assert terms["sm"][0] == terms["sm"][1] and terms["l2"][1] > terms["l2"][0]
+
+
+def test_collision_fraction_by_hand():
+    """Two graphs: a flat body patch with +Z normals; vertices below it count as inside."""
+    import torch
+    from torch_geometric.data import Data
+
+    from garsim.train.losses import collision_fraction
+
+    body = torch.tensor([[0.0, 0, 0], [1.0, 0, 0], [0.0, 0, 0]])
+    normals = torch.tensor([[0.0, 0, 1], [0.0, 0, 1], [0.0, 0, 1]])
+    pred = torch.tensor([[0.0, 0, 0.1], [0.0, 0, -0.1], [1.0, 0, -0.01], [1.0, 0, 0.2], [0.0, 0, -0.5]])
+    data = Data(pos=pred, batch=torch.tensor([0, 0, 0, 0, 1]), col_body=body, col_normal=normals,
+                col_batch=torch.tensor([0, 0, 1]), num_nodes=5)
+    np.testing.assert_allclose(collision_fraction(pred, data).numpy(), [0.5, 1.0])

@@ -108,6 +108,16 @@ def collision_loss(
     return scatter(torch.relu(eps - signed), batch, dim=0, dim_size=num_graphs, reduce="mean")
 
 
+def collision_fraction(pred: torch.Tensor, data: Data) -> torch.Tensor:
+    """Per graph, the fraction of predicted vertices behind their nearest target-body vertex's normal (DeePSD), (B,)."""
+    batch, num_graphs = _graph_ids(data)
+    idx = nearest_in_graph(pred.detach().cpu().numpy(), batch.cpu().numpy(), data.col_body.cpu().numpy(),
+                           data.col_batch.cpu().numpy(), num_graphs)
+    idx_t = torch.from_numpy(idx).to(pred.device)
+    inside = (((pred - data.col_body[idx_t]) * data.col_normal[idx_t]).sum(-1) < 0).to(pred.dtype)
+    return scatter(inside, batch, dim=0, dim_size=num_graphs, reduce="mean")
+
+
 def garsim_loss(
     pred: torch.Tensor, data: Data, weights: LossWeights | None = None, use_collision: bool = False
 ) -> tuple[torch.Tensor, dict[str, torch.Tensor]]:
