@@ -111,5 +111,5 @@ def test_collision_fraction_by_hand():
     normals = torch.tensor([[0.0, 0, 1], [0.0, 0, 1], [0.0, 0, 1]])
     pred = torch.tensor([[0.0, 0, 0.1], [0.0, 0, -0.1], [1.0, 0, -0.01], [1.0, 0, 0.2], [0.0, 0, -0.5]])
     data = Data(pos=pred, batch=torch.tensor([0, 0, 0, 0, 1]), col_body=body, col_normal=normals,
-                col_batch=torch.tensor([0, 0, 1]), num_nodes=5)
+                col_batch=torch.tensor([0, 0, 1]), num_nodes=5, num_graphs=2)
     np.testing.assert_allclose(collision_fraction(pred, data).numpy(), [0.5, 1.0])
