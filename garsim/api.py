@@ -150,10 +150,11 @@ class GarSim:
         if self.model is None:
             return sample.prior
         pred = self._network(sample)
-        if self.collision_margin is None:
-            return pred
-        normals = cached_vertex_normals(sample.body_target, sample.body_faces)
-        return push_outside(pred, sample.body_target, normals, self.collision_margin)
+        if self.collision_margin is not None:
+            normals = cached_vertex_normals(sample.body_target, sample.body_faces)
+            pred = push_outside(pred, sample.body_target, normals, self.collision_margin)
+        pred[sample.pinned] = sample.prior[sample.pinned]  # a user's pins (waistbands, straps) follow the body
+        return pred
 
     @property
     def name(self) -> str:
@@ -218,3 +219,31 @@ class GarSim:
         preset name (silk, cotton, denim, leather), a ``Fabric`` or a dict of physical values.
         """
         return self.predict(make_sample(body_canonical, body_target, garment, fabric, pinned))
+
+    def drape_sequence(
+        self,
+        body_canonical: Any,
+        body_targets: Any,
+        garment: Any,
+        fabric: Any = "cotton",
+        pinned: Any = None,
+        progress: bool = False,
+    ) -> np.ndarray:
+        """The garment on every target body of a sequence: (T, N, 3).
+
+        ``body_targets`` is a sequence of meshes (or vertex arrays sharing the canonical body's faces) or a
+        (T, Vb, 3) array. Per-garment and per-body work (validation, soft anchors, graph topology, the rig
+        fit for the canonical body) is computed once and reused across frames (content-keyed caches).
+        """
+        bc, bf = as_mesh(body_canonical, "canonical body")
+        g, gf = as_mesh(garment, "garment")
+        targets = list(body_targets) if not isinstance(body_targets, np.ndarray) else list(body_targets)
+        if not targets:
+            raise ValueError("body_targets is empty: give at least one target body")
+        frames = []
+        from tqdm import tqdm
+
+        for t in tqdm(targets, disable=not progress, unit="frame"):
+            mesh = (t, bf) if isinstance(t, np.ndarray) and t.ndim == 2 else t
+            frames.append(self.drape((bc, bf), mesh, (g, gf), fabric=fabric, pinned=pinned))
+        return np.stack(frames)

@@ -31,6 +31,9 @@ def _load_anny(topology: str):
             f"run time. Use one of {FREE_TOPOLOGIES}, or pass your own meshes as a MeshPairBody."
         )
     os.environ.setdefault("ANNY_CACHE_DIR", str(anny_cache_dir()))
+    from garsim.geometry.inside import quiet_warp
+
+    quiet_warp()  # Anny's skinning initialises warp: do it first, without the banner on stdout
     import anny
     import anny.paths
 

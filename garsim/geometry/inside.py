@@ -22,8 +22,10 @@ _DEVICE = "cpu"
 
 
 @lru_cache(maxsize=1)
-def _warp():
-    """Import and initialise warp once, quietly (the kernel cache is warp's own, ``~/.cache/warp``)."""
+def quiet_warp():
+    """Import and initialise warp once, quietly: no banner on stdout (the kernel cache is ``~/.cache/warp``).
+
+    Every garsim module that uses warp (directly, or through Anny or Newton) calls this first."""
     import warp as wp
     import warp._src.context as wp_context
 
@@ -37,7 +39,7 @@ def _warp():
 
 @lru_cache(maxsize=1)
 def _kernels():
-    wp = _warp()
+    wp = quiet_warp()
 
     @wp.kernel(module="unique")
     def inside_kernel(
@@ -94,7 +96,7 @@ class InsideTester:
     def __init__(
         self, body_vertices: np.ndarray, body_faces: np.ndarray, accuracy: float = 2.0, threshold: float = 0.5
     ) -> None:
-        wp = _warp()
+        wp = quiet_warp()
         v = _as_points(body_vertices, "body_vertices")
         f = np.asarray(body_faces)
         if f.ndim != 2 or f.shape[1] != 3 or len(f) == 0:
@@ -117,7 +119,7 @@ class InsideTester:
         self._mesh.refit()
 
     def _launch(self, points: np.ndarray, which: int, dtype) -> np.ndarray:
-        wp = _warp()
+        wp = quiet_warp()
         p = _as_points(points)
         if len(p) == 0:
             return np.zeros(0, dtype=dtype)

@@ -140,8 +140,10 @@ class ClothScene:
         fabrics: "Sequence[str | Fabric]",
         config: SimConfig,
     ) -> None:
+        from garsim.geometry.inside import quiet_warp
+
+        wp = quiet_warp()
         import newton
-        import warp as wp
 
         self.config = config
         fabrics = [get_fabric(f) for f in fabrics]

@@ -1,0 +1,198 @@
+"""Validation at the exporters' boundary and atomic writing of files whose format follows the extension.
+
+Every writer checks, before any work: the extension, that the output folder can be written, then
+the arrays: ``frames`` (T, N, 3) finite, ``faces`` (F, 3) integer indices in [0, N), optional body
+frames (T, Vb, 3) with the same T, UVs (N, 2), normals (N, 3) or (T, N, 3). Problems raise
+:class:`ExportError` (a ``ValueError``) with a one-line message.
+"""
+
+from __future__ import annotations
+
+import os
+import tempfile
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from garsim.atomic import atomic_write
+
+
+class ExportError(ValueError):
+    """Input an exporter cannot write; the one-line message says what to fix."""
+
+
+def _to_numpy(x: Any) -> np.ndarray:
+    """``np.asarray`` that also takes torch tensors (on any device) and turns ragged input into ExportError."""
+    if hasattr(x, "detach") and hasattr(x, "cpu"):
+        x = x.detach().cpu().numpy()
+    try:
+        return np.asarray(x)
+    except (TypeError, ValueError, OverflowError) as exc:
+        text = str(exc).strip().splitlines()
+        raise ExportError(f"not a numeric array ({text[0] if text else type(exc).__name__})") from None
+
+
+def check_output(path: str | os.PathLike, supported: tuple[str, ...], what: str) -> tuple[Path, str]:
+    """Check the extension and that the output folder is (or can be made) writable -> (path, extension)."""
+    p = Path(path)
+    ext = p.suffix.lower()
+    if ext not in supported:
+        got = repr(ext) if ext else "a file without an extension"
+        raise ExportError(f"{p}: {what} cannot write {got}; use one of {', '.join(supported)}")
+    check_writable_folder(p.parent, label=str(p))
+    return p, ext
+
+
+def check_writable_folder(folder: str | os.PathLike, label: str | None = None) -> Path:
+    """Fail early when files cannot be created in ``folder`` (it or its nearest existing ancestor).
+
+    The check creates and removes a probe file (``os.access`` lies for root and read-only mounts);
+    missing folders are not created here, only later by the atomic write.
+    """
+    folder = Path(folder) if str(folder) else Path(".")
+    label = label or str(folder)
+    probe_dir = folder
+    while not probe_dir.exists():
+        if probe_dir.parent == probe_dir:
+            break
+        probe_dir = probe_dir.parent
+    if probe_dir.exists() and not probe_dir.is_dir():
+        raise ExportError(f"{label}: cannot create the output folder, {probe_dir} is a file")
+    try:
+        fd, tmp = tempfile.mkstemp(dir=probe_dir, prefix=".garsim-write-probe.")
+        os.close(fd)
+        os.unlink(tmp)
+    except OSError as exc:
+        raise ExportError(f"{label}: the output folder {probe_dir} is not writable ({exc.strerror or exc})") from None
+    return folder
+
+
+def check_frames(frames: Any, name: str = "frames") -> np.ndarray:
+    """(T, N, 3) finite float32 vertex positions, T >= 1, N >= 1."""
+    try:
+        a = _to_numpy(frames)
+    except ExportError as exc:
+        raise ExportError(f"{name}: {exc}") from None
+    if a.dtype.kind not in "biuf":
+        raise ExportError(f"{name}: must be real numbers, got dtype {a.dtype}")
+    if a.ndim == 2 and a.shape[-1] == 3:
+        raise ExportError(f"{name}: expected (T, N, 3) frames, got one frame {a.shape}; pass frames[None] for a still")
+    if a.ndim != 3 or a.shape[2] != 3:
+        raise ExportError(f"{name}: expected shape (T, N, 3), got {a.shape}")
+    if a.shape[0] == 0 or a.shape[1] == 0:
+        raise ExportError(f"{name}: empty, shape {a.shape}; need at least one frame of one vertex")
+    with np.errstate(over="ignore", invalid="ignore"):
+        a = a.astype(np.float32)
+    bad = ~np.isfinite(a).all(axis=2)
+    if bad.any():
+        t, i = (int(x[0]) for x in np.nonzero(bad))
+        raise ExportError(
+            f"{name}: {int(bad.sum())} vertex positions are NaN/inf or beyond float32 range (first: frame {t}, vertex {i})"
+        )
+    return a
+
+
+def check_faces(faces: Any, num_vertices: int, name: str = "faces") -> np.ndarray:
+    """(F, 3) int64 triangle indices in [0, num_vertices), F >= 1."""
+    try:
+        f = _to_numpy(faces)
+    except ExportError as exc:
+        raise ExportError(f"{name}: {exc}") from None
+    if f.ndim != 2 or f.shape[1] != 3 or f.shape[0] == 0:
+        raise ExportError(f"{name}: expected a non-empty (F, 3) triangle index array, got shape {f.shape}")
+    if f.dtype.kind == "f":
+        if not np.isfinite(f).all() or not np.all(f == np.round(f)):
+            raise ExportError(f"{name}: face indices must be integers")
+    elif f.dtype.kind not in "iu":
+        raise ExportError(f"{name}: face indices must be integers, got dtype {f.dtype}")
+    oob = (f < 0) | (f >= num_vertices)
+    if oob.any():
+        row = int(np.flatnonzero(oob.any(axis=1))[0])
+        raise ExportError(
+            f"{name}: indices outside [0, {num_vertices - 1}] (first face {row}: {f[row].tolist()}); "
+            "faces do not match the vertices"
+        )
+    return f.astype(np.int64)
+
+
+def check_body(body_frames: Any, body_faces: Any, num_frames: int) -> tuple[np.ndarray, np.ndarray] | None:
+    """Validated (body frames (T, Vb, 3), body faces) or None; both or neither must be given, with the garment's T."""
+    if body_frames is None and body_faces is None:
+        return None
+    if body_frames is None or body_faces is None:
+        raise ExportError("body_frames and body_faces go together; pass both or neither")
+    bv = check_frames(body_frames, name="body_frames")
+    if bv.shape[0] != num_frames:
+        raise ExportError(f"body_frames: {bv.shape[0]} frames but the garment has {num_frames}; they must match")
+    return bv, check_faces(body_faces, bv.shape[1], name="body_faces")
+
+
+def check_uvs(uvs: Any, num_vertices: int) -> np.ndarray | None:
+    """(N, 2) finite float32 per-vertex UVs, or None."""
+    if uvs is None:
+        return None
+    try:
+        u = _to_numpy(uvs)
+    except ExportError as exc:
+        raise ExportError(f"uvs: {exc}") from None
+    if u.dtype.kind not in "biuf" or u.shape != (num_vertices, 2):
+        raise ExportError(f"uvs: expected one (u, v) per vertex, shape ({num_vertices}, 2), got {u.shape} {u.dtype}")
+    u = u.astype(np.float32)
+    if not np.isfinite(u).all():
+        raise ExportError("uvs: contain NaN/inf")
+    return u
+
+
+def check_normals(normals: Any, num_frames: int, num_vertices: int) -> np.ndarray | None:
+    """Per-vertex normals, (N, 3) static or (T, N, 3) per frame, finite float32, or None."""
+    if normals is None:
+        return None
+    try:
+        n = _to_numpy(normals)
+    except ExportError as exc:
+        raise ExportError(f"normals: {exc}") from None
+    if n.dtype.kind not in "biuf" or n.shape not in ((num_vertices, 3), (num_frames, num_vertices, 3)):
+        raise ExportError(
+            f"normals: expected ({num_vertices}, 3) or ({num_frames}, {num_vertices}, 3), got {n.shape} {n.dtype}"
+        )
+    n = n.astype(np.float32)
+    if not np.isfinite(n).all():
+        raise ExportError("normals: contain NaN/inf")
+    return n
+
+
+def check_fps(fps: Any) -> float:
+    try:
+        value = float(fps)
+    except (TypeError, ValueError):
+        raise ExportError(f"fps must be a positive number, got {fps!r}") from None
+    if not np.isfinite(value) or value <= 0:
+        raise ExportError(f"fps must be a positive number, got {fps!r}")
+    return value
+
+
+def atomic_write_ext(path: Path, write: Callable[[str], None]) -> Path:
+    """Atomic write for libraries that pick the format from the file name (USD, ffmpeg).
+
+    ``write`` receives a temp path in the target folder that ends with the target's extension; the
+    result is fsynced and renamed over ``path`` (via :func:`garsim.atomic.atomic_write`).
+    """
+    ext = path.suffix
+
+    def fill(tmp: str) -> None:
+        named = tmp + ext
+        try:
+            write(named)
+            os.replace(named, tmp)
+        finally:
+            if os.path.exists(named):
+                os.unlink(named)
+
+    return atomic_write(path, fill)
+
+
+def y_up(points: np.ndarray) -> np.ndarray:
+    """Z-up -> Y-up, (x, y, z) -> (x, z, -y), exactly (a permutation and a sign flip)."""
+    return np.stack([points[..., 0], points[..., 2], -points[..., 1]], axis=-1)
