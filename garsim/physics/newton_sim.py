@@ -62,6 +62,7 @@ class SimConfig:
     flat_rest_angles: bool = True  # fabric cut flat: zero rest dihedral angles
     crop_margin: float | None = 0.06  # m: collide only with body faces this close to the garment's box (at any frame)
     abort_stretch: float = 3.0  # stop early when any edge exceeds this multiple of its rest length
+    device: str = "auto"  # warp device: "auto" = the first CUDA device when present, else "cpu"
 
     def __post_init__(self) -> None:
         if self.fps <= 0 or self.substeps < 1 or self.iterations < 1:
@@ -191,7 +192,8 @@ class ClothScene:
             )
             edge_ranges.append((start, builder.edge_count))
         builder.color(include_bending=True)
-        model = builder.finalize(device="cpu")
+        device = config.device if config.device != "auto" else ("cuda:0" if wp.is_cuda_available() else "cpu")
+        model = builder.finalize(device=device)
         if config.flat_rest_angles:
             model.edge_rest_angle.zero_()
         hinges = model.edge_indices.numpy()
@@ -220,7 +222,7 @@ class ClothScene:
         self.control = model.control()
         self.body_points = self.body_mesh.mesh.points
 
-    # -- state access (CPU arrays: numpy views share memory with warp) ------------------------
+    # -- state access (numpy round trips: views on CPU, copies on a CUDA device) -------------------
     def positions(self) -> np.ndarray:
         """(C, N, 3) positions of every copy."""
         return self.state_0.particle_q.numpy().reshape(self.copies, self.num_particles, 3).copy()

@@ -1,0 +1,133 @@
+"""Point Cache 2 (.pc2, Blender / 3ds Max) and OBJ sequences.
+
+PC2 layout (little-endian): ``char[12] 'POINTCACHE2\\0'``, ``int32 version = 1``, ``int32 numPoints``,
+``float32 startFrame``, ``float32 sampleRate``, ``int32 numSamples``, then ``numSamples * numPoints``
+float32 xyz triples, frame by frame, in vertex order.
+
+In Blender: import the frame-0 OBJ written next to the cache (keep the vertex order; garsim is Z up,
+so import with Up = Z, Forward = Y, or the cache and the mesh disagree), add a *Mesh Cache* modifier,
+format PC2, and point it at the .pc2 file.
+"""
+
+from __future__ import annotations
+
+import io
+import os
+import struct
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from garsim.atomic import atomic_write, atomic_write_bytes
+from garsim.export._common import (
+    ExportError,
+    check_faces,
+    check_frames,
+    check_normals,
+    check_output,
+    check_uvs,
+    check_writable_folder,
+)
+
+PC2_MAGIC = b"POINTCACHE2\0"
+PC2_HEADER = struct.Struct("<12siiffi")  # 32 bytes
+PC2_EXTENSIONS: tuple[str, ...] = (".pc2",)
+
+
+def write_pc2(path: str | os.PathLike, frames: Any, start: float = 0.0, rate: float = 1.0) -> Path:
+    """Write (T, N, 3) vertex positions as a PC2 point cache; ``start`` frame, ``rate`` = sampleRate field.
+
+    ``rate`` is the frame step between samples (1.0: one sample per frame), as Blender writes it.
+    """
+    p, _ = check_output(path, PC2_EXTENSIONS, "write_pc2")
+    v = check_frames(frames)
+    start, rate = float(start), float(rate)
+    if not (np.isfinite(start) and np.isfinite(rate) and rate > 0):
+        raise ExportError(f"write_pc2: start must be finite and rate positive, got start={start}, rate={rate}")
+    header = PC2_HEADER.pack(PC2_MAGIC, 1, v.shape[1], start, rate, v.shape[0])
+    return atomic_write_bytes(p, header + np.ascontiguousarray(v, dtype="<f4").tobytes())
+
+
+def read_pc2(path: str | os.PathLike) -> tuple[np.ndarray, float, float]:
+    """Read a PC2 file -> (frames float32 (T, N, 3), start frame, sample rate)."""
+    data = Path(path).read_bytes()
+    if len(data) < PC2_HEADER.size:
+        raise ExportError(f"{path}: too short for a PC2 header ({len(data)} bytes)")
+    magic, version, num_points, start, rate, num_samples = PC2_HEADER.unpack_from(data)
+    if magic != PC2_MAGIC:
+        raise ExportError(f"{path}: not a PC2 file (magic {magic!r})")
+    if version != 1 or num_points < 0 or num_samples < 0:
+        raise ExportError(f"{path}: unsupported PC2 header (version {version}, {num_points} points, {num_samples} samples)")
+    expected = PC2_HEADER.size + 12 * num_points * num_samples
+    if len(data) != expected:
+        raise ExportError(f"{path}: {len(data)} bytes, the header promises {expected}; the file is truncated or corrupt")
+    frames = np.frombuffer(data, dtype="<f4", offset=PC2_HEADER.size).reshape(num_samples, num_points, 3)
+    return frames.astype(np.float32), float(start), float(rate)
+
+
+def _obj_text(vertices: np.ndarray, faces: np.ndarray, uvs: np.ndarray | None, normals: np.ndarray | None) -> bytes:
+    """OBJ text with one ``v`` (and ``vt``/``vn``) per vertex, in order; faces use 1-based ``v/vt/vn`` indices."""
+    buf = io.StringIO()
+    buf.write("# garsim export\n")
+    np.savetxt(buf, vertices, fmt="v %.9g %.9g %.9g")
+    if uvs is not None:
+        np.savetxt(buf, uvs, fmt="vt %.9g %.9g")
+    if normals is not None:
+        np.savetxt(buf, normals, fmt="vn %.9g %.9g %.9g")
+    f = faces + 1
+    if uvs is not None and normals is not None:
+        fmt, cols = "f %d/%d/%d %d/%d/%d %d/%d/%d", f[:, [0, 0, 0, 1, 1, 1, 2, 2, 2]]
+    elif uvs is not None:
+        fmt, cols = "f %d/%d %d/%d %d/%d", f[:, [0, 0, 1, 1, 2, 2]]
+    elif normals is not None:
+        fmt, cols = "f %d//%d %d//%d %d//%d", f[:, [0, 0, 1, 1, 2, 2]]
+    else:
+        fmt, cols = "f %d %d %d", f
+    np.savetxt(buf, cols, fmt=fmt)
+    return buf.getvalue().encode("ascii")
+
+
+def write_obj(
+    path: str | os.PathLike, vertices: Any, faces: Any, uvs: Any = None, normals: Any = None
+) -> Path:
+    """Write one (N, 3) mesh as OBJ in vertex order (per-vertex UVs/normals optional); atomic."""
+    p, _ = check_output(path, (".obj",), "write_obj")
+    v = check_frames(_as_frame_stack(vertices), name="vertices")[0]
+    f = check_faces(faces, len(v))
+    u = check_uvs(uvs, len(v))
+    n = check_normals(normals, 1, len(v))
+    return atomic_write_bytes(p, _obj_text(v, f, u, None if n is None else n.reshape(-1, 3)))
+
+
+def _as_frame_stack(vertices: Any) -> Any:
+    a = np.asarray(vertices) if not hasattr(vertices, "detach") else vertices.detach().cpu().numpy()
+    return a[None] if a.ndim == 2 else a
+
+
+def write_obj_sequence(
+    folder: str | os.PathLike,
+    frames: Any,
+    faces: Any,
+    uvs: Any = None,
+    normals: Any = None,
+    stem: str = "garment",
+) -> list[Path]:
+    """Write ``{stem}_{k:04d}.obj`` for every frame k (vertex order kept) -> the paths, frame order.
+
+    ``normals``: (N, 3) for all frames or (T, N, 3) per frame. For a PC2 workflow import
+    ``{stem}_0000.obj`` (the first frame) and attach the cache to it.
+    """
+    if not stem or os.sep in stem or (os.altsep and os.altsep in stem):
+        raise ExportError(f"write_obj_sequence: stem must be a plain file name prefix, got {stem!r}")
+    folder = check_writable_folder(folder)
+    v = check_frames(frames)
+    f = check_faces(faces, v.shape[1])
+    u = check_uvs(uvs, v.shape[1])
+    n = check_normals(normals, v.shape[0], v.shape[1])
+    paths = []
+    for k in range(v.shape[0]):
+        nk = None if n is None else (n if n.ndim == 2 else n[k])
+        text = _obj_text(v[k], f, u, nk)
+        paths.append(atomic_write(folder / f"{stem}_{k:04d}.obj", lambda tmp, t=text: Path(tmp).write_bytes(t)))
+    return paths
