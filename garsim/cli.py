@@ -224,7 +224,7 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("eval", help="the paper's metrics on a dataset split: GarSim vs the LBS prior")
     p.add_argument("--data", required=True, help="dataset folder")
     p.add_argument("--model", help="a trained model folder (default: the shipped model)")
-    p.add_argument("--splits", nargs="+", default=["test", "generalization"])
+    p.add_argument("--splits", nargs="+", default=["test", "ood"])
     p.add_argument("--resolution", choices=("low", "full"), default="low")
     p.add_argument("--out", help="write the results as JSON here")
     p.set_defaults(func=cmd_eval)

@@ -1,0 +1,88 @@
+"""Animation exporters: take a draped garment sequence into Blender, USD and glTF tools.
+
+``frames`` are (T, N, 3) garment vertex positions in garsim's convention (metres, Z up), ``faces``
+(F, 3) triangles; a body can come along as ``body_frames`` (T, Vb, 3) + ``body_faces``. Vertex
+order is kept in every format. Files are written atomically; bad input raises :class:`ExportError`
+(a ``ValueError``) before anything is written.
+
+========================  ===============================================================
+``.glb`` / ``.gltf``      :func:`write_gltf_animation` - morph target per frame, Y up
+``.usd/.usda/.usdc``      :func:`write_usd_animation` - time-sampled points, Z up, metres
+``.pc2``                  :func:`write_pc2` + the frame-0 OBJ beside it (Blender Mesh Cache)
+``.mp4`` / ``.gif``       :func:`write_preview` - rendered preview clip
+========================  ===============================================================
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+from typing import Any
+
+from garsim.export._common import ExportError, check_body, check_frames, check_output
+from garsim.export.gltf import GLTF_EXTENSIONS, write_gltf_animation
+from garsim.export.pc2 import PC2_EXTENSIONS, read_pc2, write_obj, write_obj_sequence, write_pc2
+from garsim.export.usd import USD_EXTENSIONS, write_usd_animation
+from garsim.export.video import VIDEO_EXTENSIONS, write_preview
+
+SUPPORTED_EXTENSIONS: tuple[str, ...] = GLTF_EXTENSIONS + USD_EXTENSIONS + PC2_EXTENSIONS + VIDEO_EXTENSIONS
+
+__all__ = [
+    "ExportError",
+    "SUPPORTED_EXTENSIONS",
+    "export_animation",
+    "read_pc2",
+    "write_gltf_animation",
+    "write_obj",
+    "write_obj_sequence",
+    "write_pc2",
+    "write_preview",
+    "write_usd_animation",
+]
+
+
+def export_animation(path: str | os.PathLike, frames: Any, faces: Any, **kw: Any) -> list[Path]:
+    """Write a garment animation in the format named by ``path``'s extension -> the files written (main first).
+
+    Keyword arguments go to the writer (``body_frames``, ``body_faces``, ``fps``, ``uvs``, ...).
+    ``.pc2`` also writes ``<stem>.obj`` (frame 0, the mesh to attach the cache to; ``uvs``/``normals``
+    go there) and, with a body, ``<stem>_body.pc2`` + ``<stem>_body.obj``; ``fps`` is ignored for PC2.
+    """
+    p, ext = check_output(path, SUPPORTED_EXTENSIONS, "export_animation")
+    if ext in GLTF_EXTENSIONS:
+        return [write_gltf_animation(p, frames, faces, **kw)]
+    if ext in USD_EXTENSIONS:
+        return [write_usd_animation(p, frames, faces, **kw)]
+    if ext in VIDEO_EXTENSIONS:
+        return [write_preview(p, frames, faces, **kw)]
+    return _export_pc2(p, frames, faces, **kw)
+
+
+def _export_pc2(
+    p: Path,
+    frames: Any,
+    faces: Any,
+    body_frames: Any = None,
+    body_faces: Any = None,
+    uvs: Any = None,
+    normals: Any = None,
+    start: float = 0.0,
+    rate: float = 1.0,
+    fps: float | None = None,
+) -> list[Path]:
+    del fps  # PC2 stores frames, not seconds
+    v = check_frames(frames)
+    body = check_body(body_frames, body_faces, v.shape[0])
+    first_normals = None
+    if normals is not None and getattr(normals, "ndim", 0) == 3:
+        first_normals = normals[0]
+    elif normals is not None:
+        first_normals = normals
+    # the OBJ first: it validates faces/uvs/normals before the cache exists
+    obj = write_obj(p.with_suffix(".obj"), v[0], faces, uvs=uvs, normals=first_normals)
+    out = [write_pc2(p, v, start=start, rate=rate), obj]
+    if body is not None:
+        body_pc2 = p.with_name(f"{p.stem}_body.pc2")
+        out.append(write_pc2(body_pc2, body[0], start=start, rate=rate))
+        out.append(write_obj(body_pc2.with_suffix(".obj"), body[0][0], body[1]))
+    return out
