@@ -15,7 +15,7 @@ from garsim.garments.fabrics import Fabric, fabric_from_values, get_fabric
 from garsim.garments.garment import Garment
 from garsim.garments.remesh import BarycentricMap, barycentric_map, decimate, transfer_barycentric
 from garsim.geometry.cache import ContentCache, content_key
-from garsim.geometry.io import MeshError, as_mesh
+from garsim.geometry.io import MeshError, as_mesh, y_up_to_z_up, z_up_to_y_up
 from garsim.geometry.mesh import cached_vertex_normals
 from garsim.geometry.proximity import push_outside
 
@@ -59,6 +59,50 @@ def fabric_fields(fabric: Any) -> tuple[str, dict[str, float] | None]:
                      f"got {type(fabric).__name__}")
 
 
+UNITS: dict[str, float] = {"m": 1.0, "cm": 0.01, "mm": 0.001}
+"""Length units accepted at the API boundary (metres per unit)."""
+BODY_HEIGHT_RANGE = (0.4, 2.6)
+"""Plausible standing body heights in metres: outside it the input is in other units (or not a body)."""
+FAR_FROM_BODY = 0.10
+"""m: a garment whose median vertex is farther than this from the canonical body does not surround it."""
+
+
+def to_internal(vertices: np.ndarray, up: str = "z", units: str = "m") -> np.ndarray:
+    """User coordinates (``up`` axis, ``units``) -> garsim's (metres, Z up), float64."""
+    if up not in ("z", "y"):
+        raise ValueError(f"up must be 'z' or 'y', got {up!r}")
+    if units not in UNITS:
+        raise ValueError(f"units must be one of {', '.join(UNITS)}, got {units!r}")
+    v = np.asarray(vertices, dtype=np.float64) * UNITS[units]
+    return y_up_to_z_up(v) if up == "y" else v
+
+
+def from_internal(vertices: np.ndarray, up: str = "z", units: str = "m") -> np.ndarray:
+    """Inverse of :func:`to_internal` (garsim's metres, Z up -> the user's axis and units)."""
+    v = z_up_to_y_up(np.asarray(vertices, dtype=np.float64)) if up == "y" else np.asarray(vertices, dtype=np.float64)
+    return v / UNITS[units]
+
+
+def check_scene(body: np.ndarray, garment: np.ndarray) -> None:
+    """Refuse a body that is plainly in another axis or unit, or a garment that does not surround it."""
+    extent = body.max(axis=0) - body.min(axis=0)
+    if extent[2] < 0.6 * extent.max():  # a T-pose's arm span may match its height; lying down it is far taller
+        axis = "XYZ"[int(np.argmax(extent))]
+        raise MeshError(f"the canonical body's longest axis is {axis}, not Z (up): for a Y-up file (Blender, glTF) "
+                        "pass up='y' (CLI: --up y)")
+    height = float(extent[2])
+    if not (BODY_HEIGHT_RANGE[0] <= height <= BODY_HEIGHT_RANGE[1]):
+        hint = "cm" if 40 <= height <= 260 else "mm" if 400 <= height <= 2600 else None
+        fix = f"pass units='{hint}' (CLI: --units {hint})" if hint else "give the meshes in metres, cm or mm"
+        raise MeshError(f"the canonical body is {height:.3g} units tall, not a person in metres: {fix}")
+    from garsim.geometry.proximity import cached_tree
+
+    dist = cached_tree(body).query(garment)[0]
+    if float(np.median(dist)) > FAR_FROM_BODY:
+        raise MeshError(f"the garment's median vertex is {100 * float(np.median(dist)):.0f} cm from the canonical body: "
+                        "it must be draped on the canonical body (same position, axis and units)")
+
+
 def make_sample(
     body_canonical: Any,
     body_target: Any,
@@ -66,12 +110,16 @@ def make_sample(
     fabric: Any = "cotton",
     pinned: Any = None,
     garment_type: str = "unknown",
+    up: str = "z",
+    units: str = "m",
 ) -> Sample:
-    """Validate user meshes and build the model's input record (with the garment prior)."""
+    """Validate user meshes (in ``up`` axis and ``units``) and build the model's input record (with the prior)."""
     fabric_name, fabric_values = fabric_fields(fabric)
     bc, bf = as_mesh(body_canonical, "canonical body")
     bt, bf_t = as_mesh(body_target, "target body")
     g, gf = as_mesh(garment, "garment")
+    bc, bt, g = (to_internal(v, up, units).astype(np.float32) for v in (bc, bt, g))
+    check_scene(bc, g)
     if bc.shape != bt.shape or bf.shape != bf_t.shape or not np.array_equal(bf, bf_t):
         raise MeshError(
             f"canonical body ({len(bc)} vertices, {len(bf)} faces) and target body ({len(bt)} vertices, "
@@ -211,14 +259,18 @@ class GarSim:
         garment: Any,
         fabric: Any = "cotton",
         pinned: Any = None,
+        up: str = "z",
+        units: str = "m",
     ) -> np.ndarray:
-        """Predicted garment vertices (N, 3) on ``body_target``.
+        """Predicted garment vertices (N, 3) on ``body_target``, in the input's axis and units.
 
         Each mesh is a ``trimesh.Trimesh``, a ``(vertices, faces)`` pair of arrays or a file path;
         both bodies share one topology; ``garment`` is draped on ``body_canonical``. ``fabric`` is a
-        preset name (silk, cotton, denim, leather), a ``Fabric`` or a dict of physical values.
+        preset name (silk, cotton, denim, leather), a ``Fabric`` or a dict of physical values. ``up``
+        ('z' or 'y') and ``units`` ('m', 'cm', 'mm') describe the input meshes; the output uses the same.
         """
-        return self.predict(make_sample(body_canonical, body_target, garment, fabric, pinned))
+        out = self.predict(make_sample(body_canonical, body_target, garment, fabric, pinned, up=up, units=units))
+        return from_internal(out, up, units).astype(np.float32) if (up, units) != ("z", "m") else out
 
     def drape_sequence(
         self,
@@ -228,6 +280,8 @@ class GarSim:
         fabric: Any = "cotton",
         pinned: Any = None,
         progress: bool = False,
+        up: str = "z",
+        units: str = "m",
     ) -> np.ndarray:
         """The garment on every target body of a sequence: (T, N, 3).
 
@@ -245,5 +299,5 @@ class GarSim:
 
         for t in tqdm(targets, disable=not progress, unit="frame"):
             mesh = (t, bf) if isinstance(t, np.ndarray) and t.ndim == 2 else t
-            frames.append(self.drape((bc, bf), mesh, (g, gf), fabric=fabric, pinned=pinned))
+            frames.append(self.drape((bc, bf), mesh, (g, gf), fabric=fabric, pinned=pinned, up=up, units=units))
         return np.stack(frames)

@@ -46,13 +46,54 @@ def cmd_drape(args: argparse.Namespace) -> int:
     sim = GarSim.pretrained() if not args.prior_only else GarSim.prior_only()
     garment = load_mesh(args.garment)
     pinned = np.loadtxt(args.pinned, dtype=np.int64, ndmin=1) if args.pinned else None
-    verts = sim.drape(args.canonical, args.target, garment, fabric=args.fabric, pinned=pinned)
+    verts = sim.drape(args.canonical, args.target, garment, fabric=args.fabric, pinned=pinned, up=args.up,
+                      units=args.units)
     save_mesh(args.out, verts, garment[1], y_up=args.y_up)
     print(args.out)
     if args.png:
         from garsim.geometry.render import render_views
 
         print(render_views(args.png, [load_mesh(args.target), (verts, garment[1])]))
+    return 0
+
+
+def cmd_animate(args: argparse.Namespace) -> int:
+    import numpy as np
+
+    from garsim.api import GarSim
+    from garsim.export import SUPPORTED_EXTENSIONS, export_animation
+    from garsim.geometry.io import as_mesh, load_mesh
+
+    out = Path(args.out)
+    if out.suffix.lower() not in SUPPORTED_EXTENSIONS:  # checked before any work
+        raise ValueError(f"cannot write {out.suffix or 'a file without extension'!r}; use one of "
+                         f"{', '.join(SUPPORTED_EXTENSIONS)}")
+    garment = load_mesh(args.garment)
+    if args.motion:
+        from garsim.bodies.anny import AnnyBody
+        from garsim.bodies.poses import batched_matrices, motion, stack_poses
+
+        body = AnnyBody()
+        canonical = (body.canonical().vertices, body.faces)
+        targets = list(body.pose_batch(batched_matrices(stack_poses(motion(args.motion, args.frames))))[0])
+        faces = body.faces
+    else:
+        if not (args.canonical and args.targets):
+            raise ValueError("give --motion NAME (the default Anny body), or --canonical and --targets (a folder of "
+                             "body OBJs or an .npz with an array 'vertices' of shape (T, V, 3))")
+        canonical = as_mesh(args.canonical, "canonical body")
+        faces = canonical[1]
+        src = Path(args.targets)
+        if src.is_dir():
+            targets = [load_mesh(p)[0] for p in sorted(src.glob("*.obj"))]
+        else:
+            with np.load(src, allow_pickle=False) as z:
+                targets = list(z["vertices"])
+    sim = GarSim.prior_only() if args.prior_only else GarSim.pretrained()
+    frames = sim.drape_sequence(canonical, targets, garment, fabric=args.fabric, progress=not args.quiet)
+    written = export_animation(out, frames, garment[1], body_frames=np.stack(targets), body_faces=faces, fps=args.fps)
+    for path in written:
+        print(path)
     return 0
 
 
@@ -197,8 +238,24 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", required=True, help="output garment mesh path")
     p.add_argument("--png", help="also render target body + draped garment to this PNG")
     p.add_argument("--y-up", action="store_true", help="write the output Y-up (Blender/glTF)")
+    p.add_argument("--up", choices=("z", "y"), default="z", help="up axis of the input meshes (Blender/glTF: y)")
+    p.add_argument("--units", choices=("m", "cm", "mm"), default="m", help="length unit of the input meshes")
     p.add_argument("--prior-only", action="store_true", help="use the skinning prior, not the model")
     p.set_defaults(func=cmd_drape)
+
+    p = sub.add_parser("animate", help="drape a garment over a pose sequence; write GLB, USD, PC2 (+OBJ), MP4 or GIF",
+                       epilog="example: garsim animate --garment skirt.obj --motion walk --out walk.glb")
+    p.add_argument("--garment", required=True, help="garment mesh draped on the canonical body")
+    p.add_argument("--motion", help="a motion of the library on the default Anny body: walk, raise_arms, turn, sit_down")
+    p.add_argument("--frames", type=int, default=30, help="frames of a --motion")
+    p.add_argument("--canonical", help="canonical body mesh (with --targets)")
+    p.add_argument("--targets", help="folder of target body OBJs (sorted by name) or an .npz with 'vertices' (T, V, 3)")
+    p.add_argument("--fabric", default="cotton", choices=FABRICS)
+    p.add_argument("--fps", type=float, default=30.0)
+    p.add_argument("--out", required=True, help="output file: .glb/.gltf, .usd/.usda/.usdc, .pc2, .mp4 or .gif")
+    p.add_argument("--prior-only", action="store_true", help="use the skinning prior, not the model")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.set_defaults(func=cmd_animate)
 
     p = sub.add_parser("train", help="train GarSim on a generated dataset (resumable; torchrun for DDP)")
     p.add_argument("--data", required=True, help="dataset folder made by `garsim data generate`")

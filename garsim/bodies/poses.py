@@ -484,3 +484,47 @@ def walk_cycle(
     phases = 2.0 * math.pi * np.arange(count) / num_frames
     batched = walk_pose(phases, stride, axes)
     return [unbatch(batched, i) for i in range(count)]
+
+
+# -- motion library ------------------------------------------------------------------------------
+def _towards(target: Mapping[str, np.ndarray], num_frames: int, start: Mapping[str, np.ndarray] | None = None,
+             back: bool = True) -> list[dict[str, np.ndarray]]:
+    """From ``start`` (default: arms down at the sides) to ``target`` and (``back``) back again."""
+    rest = start if start is not None else STANDING
+    half = max(2, num_frames // 2 + 1) if back else num_frames
+    out = interpolate_poses(rest, {**rest, **target}, half)
+    return out + interpolate_poses({**rest, **target}, rest, num_frames - half + 2)[1:-1] if back else out
+
+
+def _pose(angles: Mapping[str, float]) -> dict[str, np.ndarray]:
+    return unbatch(angles_to_pose(angles), 0)
+
+
+STANDING: dict[str, np.ndarray] = _pose({"shoulder_elevation_L": -70.0, "shoulder_elevation_R": -70.0})
+"""Standing with the arms down at the sides (the everyday rest pose the motions start from)."""
+
+
+def motion(name: str, num_frames: int = 30) -> list[dict[str, np.ndarray]]:
+    """A pose sequence of the motion library: ``walk`` (one cycle), ``raise_arms``, ``turn`` (a torso twist
+    to each side), ``sit_down`` (hips and knees bend to a chair-height sit) — each ``num_frames`` poses."""
+    if num_frames < 2:
+        raise ValueError(f"num_frames must be >= 2, got {num_frames}")
+    if name == "walk":
+        return walk_cycle(num_frames, include_end=False)
+    if name == "raise_arms":
+        return _towards(_pose({"shoulder_elevation_L": 20.0, "shoulder_elevation_R": 20.0,
+                                        "shoulder_flexion_L": 30.0, "shoulder_flexion_R": 30.0}), num_frames)
+    if name == "turn":
+        left = _towards(_pose({"shoulder_elevation_L": -70.0, "shoulder_elevation_R": -70.0,
+                                        "spine_twist": 25.0}), num_frames // 2)
+        right = _towards(_pose({"shoulder_elevation_L": -70.0, "shoulder_elevation_R": -70.0,
+                                         "spine_twist": -25.0}), num_frames - len(left))
+        return left + right
+    if name == "sit_down":
+        return _towards(_pose({"shoulder_elevation_L": -70.0, "shoulder_elevation_R": -70.0,
+                                        "hip_flexion_L": 80.0, "hip_flexion_R": 80.0, "knee_flexion_L": 85.0,
+                                        "knee_flexion_R": 85.0, "spine_flexion": 10.0}), num_frames, back=False)
+    raise ValueError(f"unknown motion {name!r}; choose one of {MOTIONS}")
+
+
+MOTIONS: tuple[str, ...] = ("walk", "raise_arms", "turn", "sit_down")

@@ -75,7 +75,7 @@ def check_frames(frames: Any, name: str = "frames") -> np.ndarray:
         a = _to_numpy(frames)
     except ExportError as exc:
         raise ExportError(f"{name}: {exc}") from None
-    if a.dtype.kind not in "biuf":
+    if a.dtype.kind not in "iuf":
         raise ExportError(f"{name}: must be real numbers, got dtype {a.dtype}")
     if a.ndim == 2 and a.shape[-1] == 3:
         raise ExportError(f"{name}: expected (T, N, 3) frames, got one frame {a.shape}; pass frames[None] for a still")
@@ -89,7 +89,8 @@ def check_frames(frames: Any, name: str = "frames") -> np.ndarray:
     if bad.any():
         t, i = (int(x[0]) for x in np.nonzero(bad))
         raise ExportError(
-            f"{name}: {int(bad.sum())} vertex positions are NaN/inf or beyond float32 range (first: frame {t}, vertex {i})"
+            f"{name}: {int(bad.sum())} vertex positions are NaN/inf or beyond float32 range "
+            f"(first: frame {t}, vertex {i})"
         )
     return a
 
@@ -137,7 +138,7 @@ def check_uvs(uvs: Any, num_vertices: int) -> np.ndarray | None:
         u = _to_numpy(uvs)
     except ExportError as exc:
         raise ExportError(f"uvs: {exc}") from None
-    if u.dtype.kind not in "biuf" or u.shape != (num_vertices, 2):
+    if u.dtype.kind not in "iuf" or u.shape != (num_vertices, 2):
         raise ExportError(f"uvs: expected one (u, v) per vertex, shape ({num_vertices}, 2), got {u.shape} {u.dtype}")
     u = u.astype(np.float32)
     if not np.isfinite(u).all():
@@ -153,7 +154,7 @@ def check_normals(normals: Any, num_frames: int, num_vertices: int) -> np.ndarra
         n = _to_numpy(normals)
     except ExportError as exc:
         raise ExportError(f"normals: {exc}") from None
-    if n.dtype.kind not in "biuf" or n.shape not in ((num_vertices, 3), (num_frames, num_vertices, 3)):
+    if n.dtype.kind not in "iuf" or n.shape not in ((num_vertices, 3), (num_frames, num_vertices, 3)):
         raise ExportError(
             f"normals: expected ({num_vertices}, 3) or ({num_frames}, {num_vertices}, 3), got {n.shape} {n.dtype}"
         )
@@ -193,6 +194,6 @@ def atomic_write_ext(path: Path, write: Callable[[str], None]) -> Path:
     return atomic_write(path, fill)
 
 
-def y_up(points: np.ndarray) -> np.ndarray:
+def to_y_up(points: np.ndarray) -> np.ndarray:
     """Z-up -> Y-up, (x, y, z) -> (x, z, -y), exactly (a permutation and a sign flip)."""
     return np.stack([points[..., 0], points[..., 2], -points[..., 1]], axis=-1)

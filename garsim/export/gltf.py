@@ -33,7 +33,7 @@ from garsim.export._common import (
     check_normals,
     check_output,
     check_uvs,
-    y_up as _y_up,
+    to_y_up,
 )
 
 GLTF_EXTENSIONS: tuple[str, ...] = (".glb", ".gltf")
@@ -99,7 +99,9 @@ def _add_mesh(
     base64_ = base.astype(np.float64)
     for k in range(len(frames)):
         # the difference in float64, rounded once: base + target reproduces frame k to float32 rounding
-        t = {"POSITION": b.add((frames[k].astype(np.float64) - base64_).astype(np.float32), "VEC3", _ARRAY_BUFFER, True)}
+        t = {
+            "POSITION": b.add((frames[k].astype(np.float64) - base64_).astype(np.float32), "VEC3", _ARRAY_BUFFER, True)
+        }
         if normals is not None and normals.ndim == 3:
             t["NORMAL"] = b.add(normals[k].astype(np.float64) - normals[0], "VEC3", _ARRAY_BUFFER)
         targets.append(t)
@@ -164,20 +166,34 @@ def write_gltf_animation(
     if interp not in ("LINEAR", "STEP"):
         raise ExportError(f"interpolation must be 'LINEAR' or 'STEP', got {interpolation!r}")
     if y_up:
-        v = _y_up(v)
-        n = None if n is None else _y_up(n)
-        body = None if body is None else (_y_up(body[0]), body[1])
+        v = to_y_up(v)
+        n = None if n is None else to_y_up(n)
+        body = None if body is None else (to_y_up(body[0]), body[1])
 
     b = _Builder()
     materials = [
-        {"name": "garment", "doubleSided": True,
-         "pbrMetallicRoughness": {"baseColorFactor": [0.23, 0.46, 0.69, 1.0], "metallicFactor": 0.0, "roughnessFactor": 0.9}},
+        {
+            "name": "garment",
+            "doubleSided": True,
+            "pbrMetallicRoughness": {
+                "baseColorFactor": [0.23, 0.46, 0.69, 1.0],
+                "metallicFactor": 0.0,
+                "roughnessFactor": 0.9,
+            },
+        },
     ]
     meshes = [_add_mesh(b, "Garment", v, f, u, n, material=0)]
     if body is not None:
         materials.append(
-            {"name": "body", "doubleSided": False,
-             "pbrMetallicRoughness": {"baseColorFactor": [0.78, 0.78, 0.78, 1.0], "metallicFactor": 0.0, "roughnessFactor": 0.8}}
+            {
+                "name": "body",
+                "doubleSided": False,
+                "pbrMetallicRoughness": {
+                    "baseColorFactor": [0.78, 0.78, 0.78, 1.0],
+                    "metallicFactor": 0.0,
+                    "roughnessFactor": 0.8,
+                },
+            }
         )
         meshes.append(_add_mesh(b, "Body", body[0], body[1], None, None, material=1))
     num = v.shape[0]

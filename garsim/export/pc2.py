@@ -58,10 +58,14 @@ def read_pc2(path: str | os.PathLike) -> tuple[np.ndarray, float, float]:
     if magic != PC2_MAGIC:
         raise ExportError(f"{path}: not a PC2 file (magic {magic!r})")
     if version != 1 or num_points < 0 or num_samples < 0:
-        raise ExportError(f"{path}: unsupported PC2 header (version {version}, {num_points} points, {num_samples} samples)")
+        raise ExportError(
+            f"{path}: unsupported PC2 header (version {version}, {num_points} points, {num_samples} samples)"
+        )
     expected = PC2_HEADER.size + 12 * num_points * num_samples
     if len(data) != expected:
-        raise ExportError(f"{path}: {len(data)} bytes, the header promises {expected}; the file is truncated or corrupt")
+        raise ExportError(
+            f"{path}: {len(data)} bytes, the header promises {expected}; the file is truncated or corrupt"
+        )
     frames = np.frombuffer(data, dtype="<f4", offset=PC2_HEADER.size).reshape(num_samples, num_points, 3)
     return frames.astype(np.float32), float(start), float(rate)
 
@@ -88,9 +92,7 @@ def _obj_text(vertices: np.ndarray, faces: np.ndarray, uvs: np.ndarray | None, n
     return buf.getvalue().encode("ascii")
 
 
-def write_obj(
-    path: str | os.PathLike, vertices: Any, faces: Any, uvs: Any = None, normals: Any = None
-) -> Path:
+def write_obj(path: str | os.PathLike, vertices: Any, faces: Any, uvs: Any = None, normals: Any = None) -> Path:
     """Write one (N, 3) mesh as OBJ in vertex order (per-vertex UVs/normals optional); atomic."""
     p, _ = check_output(path, (".obj",), "write_obj")
     v = check_frames(_as_frame_stack(vertices), name="vertices")[0]

@@ -85,7 +85,11 @@ def write_preview(
     views = [views] if isinstance(views, (str, int, float)) else list(views)
 
     keep = _frame_indices(v.shape[0], int(max_frames))
-    everything = v[keep].reshape(-1, 3) if body is None else np.concatenate([v[keep].reshape(-1, 3), body[0][keep].reshape(-1, 3)])
+    everything = (
+        v[keep].reshape(-1, 3)
+        if body is None
+        else np.concatenate([v[keep].reshape(-1, 3), body[0][keep].reshape(-1, 3)])
+    )
     anchor = _anchor(everything)
     images = []
     for k in keep:
@@ -111,8 +115,15 @@ def write_preview(
             iio.mimwrite(tmp, images, format="GIF", duration=1000.0 / out_fps, loop=0)
         else:
             with iio.get_writer(
-                tmp, format="FFMPEG", mode="I", fps=out_fps, codec="libx264", pixelformat="yuv420p",
-                macro_block_size=16, quality=7, ffmpeg_log_level="error",
+                tmp,
+                format="FFMPEG",
+                mode="I",
+                fps=out_fps,
+                codec="libx264",
+                pixelformat="yuv420p",
+                macro_block_size=16,
+                quality=7,
+                ffmpeg_log_level="error",
             ) as writer:
                 for im in images:
                     writer.append_data(im)

@@ -1,0 +1,415 @@
+"""Animation exporters (garsim.export): every file is read back with an independent reader.
+
+glTF: trimesh for the base mesh + a small JSON/BIN parser (below) for morph targets and the animation;
+USD: pxr.Usd; PC2: read_pc2 and a raw struct parse; OBJ: trimesh; video: imageio.
+"""
+
+from __future__ import annotations
+
+import base64
+import json
+import struct
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from garsim.export import (
+    SUPPORTED_EXTENSIONS,
+    ExportError,
+    export_animation,
+    read_pc2,
+    write_gltf_animation,
+    write_obj_sequence,
+    write_pc2,
+    write_preview,
+    write_usd_animation,
+)
+
+T = 4
+RTOL = 1e-6
+
+
+# ----------------------------------------------------------------------------- fixtures
+
+
+@pytest.fixture(scope="module")
+def garment() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A 3x3 grid (9 vertices, 8 triangles) waving over T frames: (frames (T, 9, 3), faces, uvs (9, 2))."""
+    u, w = np.meshgrid(np.linspace(0.0, 1.0, 3), np.linspace(0.0, 1.0, 3), indexing="ij")
+    uvs = np.stack([u.ravel(), w.ravel()], axis=1)
+    faces = []
+    for i in range(2):
+        for j in range(2):
+            a = i * 3 + j
+            faces += [[a, a + 3, a + 1], [a + 1, a + 3, a + 4]]
+    frames = np.stack(
+        [
+            np.stack([0.4 * uvs[:, 0] - 0.2, -0.15 + 0.05 * np.sin(3.0 * uvs[:, 0] + t), 1.0 + 0.5 * uvs[:, 1]], axis=1)
+            for t in range(T)
+        ]
+    ).astype(np.float32)
+    return frames, np.array(faces, dtype=np.int64), uvs.astype(np.float32)
+
+
+@pytest.fixture(scope="module")
+def body() -> tuple[np.ndarray, np.ndarray]:
+    """A small icosphere (42 vertices) rising 1 cm per frame: (frames (T, 42, 3), faces)."""
+    import trimesh
+
+    m = trimesh.creation.icosphere(subdivisions=1, radius=0.2)
+    v = np.asarray(m.vertices, dtype=np.float32)
+    frames = np.stack([v + np.array([0.0, 0.0, 1.2 + 0.01 * t], dtype=np.float32) for t in range(T)])
+    return frames, np.asarray(m.faces, dtype=np.int64)
+
+
+def _close(actual: np.ndarray, expected: np.ndarray) -> None:
+    scale = float(np.abs(expected).max())
+    np.testing.assert_allclose(actual, expected, rtol=RTOL, atol=RTOL * scale)
+
+
+def _z_up(points: np.ndarray) -> np.ndarray:
+    """Undo the exporter's Z-up -> Y-up ((x, y, z) -> (x, z, -y)): (x, y, z) -> (x, -z, y)."""
+    return np.stack([points[..., 0], -points[..., 2], points[..., 1]], axis=-1)
+
+
+# ----------------------------------------------------------------------------- an independent glTF reader
+
+
+def _read_gltf(path: Path) -> tuple[dict, bytes]:
+    """(JSON document, BIN buffer) of a .glb (checking the chunk layout) or a .gltf with a data URI."""
+    data = path.read_bytes()
+    if path.suffix == ".gltf":
+        doc = json.loads(data)
+        uri = doc["buffers"][0]["uri"]
+        assert uri.startswith("data:application/octet-stream;base64,")
+        return doc, base64.b64decode(uri.split(",", 1)[1])
+    magic, version, total = struct.unpack_from("<III", data, 0)
+    assert (magic, version, total) == (0x46546C67, 2, len(data))
+    json_len, json_type = struct.unpack_from("<II", data, 12)
+    assert json_type == 0x4E4F534A and json_len % 4 == 0
+    doc = json.loads(data[20 : 20 + json_len])
+    bin_len, bin_type = struct.unpack_from("<II", data, 20 + json_len)
+    assert bin_type == 0x004E4942 and bin_len % 4 == 0
+    assert 28 + json_len + bin_len == len(data)
+    blob = data[28 + json_len : 28 + json_len + bin_len]
+    assert doc["buffers"][0]["byteLength"] <= bin_len
+    return doc, blob
+
+
+def _accessor(doc: dict, blob: bytes, index: int) -> np.ndarray:
+    acc = doc["accessors"][index]
+    view = doc["bufferViews"][acc["bufferView"]]
+    dtype = {5126: "<f4", 5125: "<u4", 5123: "<u2"}[acc["componentType"]]
+    width = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4}[acc["type"]]
+    assert "byteStride" not in view
+    offset = view.get("byteOffset", 0) + acc.get("byteOffset", 0)
+    a = np.frombuffer(blob, dtype=dtype, count=acc["count"] * width, offset=offset)
+    assert a.nbytes <= view["byteLength"]
+    return a.reshape(acc["count"], width) if width > 1 else a
+
+
+def _gltf_mesh(doc: dict, blob: bytes, name: str) -> dict:
+    """Base attributes, faces, and every frame reconstructed as base + morph target k."""
+    mesh = next(m for m in doc["meshes"] if m["name"] == name)
+    (prim,) = mesh["primitives"]
+    attrs = {k: _accessor(doc, blob, i) for k, i in prim["attributes"].items()}
+    base = attrs["POSITION"]
+    frames = np.stack([base + _accessor(doc, blob, t["POSITION"]) for t in prim["targets"]])
+    out = {"attrs": attrs, "faces": _accessor(doc, blob, prim["indices"]).reshape(-1, 3), "frames": frames}
+    if "NORMAL" in prim["targets"][0]:
+        out["normals"] = np.stack([attrs["NORMAL"] + _accessor(doc, blob, t["NORMAL"]) for t in prim["targets"]])
+    for t in prim["targets"]:  # glTF requires min/max on POSITION accessors, morph targets included
+        acc = doc["accessors"][t["POSITION"]]
+        assert "min" in acc and "max" in acc
+    return out
+
+
+# ----------------------------------------------------------------------------- PC2 / OBJ
+
+
+def test_pc2_roundtrip_and_raw_layout(tmp_path, garment):
+    frames = garment[0]
+    p = write_pc2(tmp_path / "g.pc2", frames, start=1.0, rate=1.0)
+    got, start, rate = read_pc2(p)
+    assert got.shape == (T, 9, 3) and (start, rate) == (1.0, 1.0)
+    np.testing.assert_array_equal(got, frames)  # float32 in, float32 out: bit-exact
+    # independent raw parse of the documented layout
+    data = p.read_bytes()
+    magic, version, npts, start_raw, rate_raw, nsamp = struct.unpack_from("<12siiffi", data, 0)
+    assert magic == b"POINTCACHE2\0" and version == 1 and npts == 9 and nsamp == T
+    assert (start_raw, rate_raw) == (1.0, 1.0)
+    assert len(data) == 32 + T * 9 * 12
+    raw = np.array(struct.unpack_from(f"<{T * 9 * 3}f", data, 32)).reshape(T, 9, 3)
+    _close(raw, frames)
+
+
+def test_read_pc2_rejects_truncated_file(tmp_path, garment):
+    p = write_pc2(tmp_path / "g.pc2", garment[0])
+    p.write_bytes(p.read_bytes()[:-4])
+    with pytest.raises(ValueError, match="truncated"):
+        read_pc2(p)
+
+
+def test_obj_sequence_keeps_order_uvs_normals(tmp_path, garment):
+    import trimesh
+
+    frames, faces, uvs = garment
+    normals = np.tile(np.array([0.0, -1.0, 0.0], dtype=np.float32), (T, 9, 1))
+    paths = write_obj_sequence(tmp_path / "seq", frames, faces, uvs=uvs, normals=normals, stem="shirt")
+    assert [p.name for p in paths] == [f"shirt_{k:04d}.obj" for k in range(T)]
+    for k, p in enumerate(paths):
+        m = trimesh.load(p, process=False, maintain_order=True)
+        assert m.vertices.shape == (9, 3)
+        _close(np.asarray(m.vertices), frames[k])
+        np.testing.assert_array_equal(m.faces, faces)
+        _close(np.asarray(m.visual.uv), uvs)
+        text = p.read_text()
+        assert text.count("\nvt ") == 9 and text.count("\nvn ") == 9 and "f 1/1/1 4/4/4 2/2/2" in text
+
+
+def test_export_animation_pc2_writes_frame0_obj_and_body(tmp_path, garment, body):
+    import trimesh
+
+    frames, faces, uvs = garment
+    out = export_animation(tmp_path / "drape.pc2", frames, faces, body_frames=body[0], body_faces=body[1], uvs=uvs)
+    assert [p.name for p in out] == ["drape.pc2", "drape.obj", "drape_body.pc2", "drape_body.obj"]
+    m = trimesh.load(tmp_path / "drape.obj", process=False, maintain_order=True)
+    _close(np.asarray(m.vertices), frames[0])
+    np.testing.assert_array_equal(m.faces, faces)
+    _close(read_pc2(tmp_path / "drape_body.pc2")[0], body[0])
+    mb = trimesh.load(tmp_path / "drape_body.obj", process=False, maintain_order=True)
+    np.testing.assert_array_equal(mb.faces, body[1])
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted(p.name for p in out)  # no temp files left
+
+
+# ----------------------------------------------------------------------------- glTF
+
+
+@pytest.mark.parametrize("interpolation", ["LINEAR", "STEP"])
+def test_glb_base_mesh_morph_targets_and_animation(tmp_path, garment, body, interpolation):
+    import trimesh
+
+    frames, faces, uvs = garment
+    p = write_gltf_animation(
+        tmp_path / "drape.glb",
+        frames,
+        faces,
+        body_frames=body[0],
+        body_faces=body[1],
+        fps=24,
+        uvs=uvs,
+        interpolation=interpolation,
+    )
+    # trimesh: the base meshes are frame 0 in Y-up, vertex order and faces kept, UVs survive
+    scene = trimesh.load(p, force="scene")
+    g, b = scene.geometry["Garment"], scene.geometry["Body"]
+    _close(_z_up(np.asarray(g.vertices)), frames[0])
+    np.testing.assert_array_equal(g.faces, faces)
+    _close(np.asarray(g.visual.uv), uvs)
+    _close(_z_up(np.asarray(b.vertices)), body[0][0])
+    np.testing.assert_array_equal(b.faces, body[1])
+    # our reader: every frame from the morph targets
+    doc, blob = _read_gltf(p)
+    gm = _gltf_mesh(doc, blob, "Garment")
+    assert gm["frames"].shape == (T, 9, 3)
+    _close(_z_up(gm["frames"]), frames)
+    np.testing.assert_array_equal(gm["faces"], faces)
+    _close(gm["attrs"]["TEXCOORD_0"], np.stack([uvs[:, 0], 1.0 - uvs[:, 1]], axis=1))  # glTF's v points down
+    bm = _gltf_mesh(doc, blob, "Body")
+    _close(_z_up(bm["frames"]), body[0])
+    # the animation: key k at k / fps with weight 1 on target k only, one channel per mesh node
+    (anim,) = doc["animations"]
+    assert len(anim["channels"]) == 2
+    names = set()
+    for ch in anim["channels"]:
+        sampler = anim["samplers"][ch["sampler"]]
+        assert ch["target"]["path"] == "weights" and sampler["interpolation"] == interpolation
+        node = doc["nodes"][ch["target"]["node"]]
+        names.add(node["name"])
+        times = _accessor(doc, blob, sampler["input"])
+        weights = _accessor(doc, blob, sampler["output"]).reshape(T, T)
+        _close(times, np.arange(T) / 24.0)
+        np.testing.assert_array_equal(weights, np.eye(T))
+        assert len(doc["meshes"][node["mesh"]]["primitives"][0]["targets"]) == T
+    assert names == {"Garment", "Body"}
+
+
+def test_gltf_embedded_z_up_and_per_frame_normals(tmp_path, garment):
+    frames, faces, _ = garment
+    rng = np.random.default_rng(0)
+    normals = rng.normal(size=(T, 9, 3)).astype(np.float32)
+    normals /= np.linalg.norm(normals, axis=2, keepdims=True)
+    out = export_animation(tmp_path / "drape.gltf", frames, faces, y_up=False, normals=normals)
+    doc, blob = _read_gltf(out[0])
+    gm = _gltf_mesh(doc, blob, "Garment")
+    _close(gm["frames"], frames)  # y_up=False: garsim's coordinates as they are
+    _close(gm["normals"], normals)
+    assert [m["name"] for m in doc["meshes"]] == ["Garment"]
+
+
+def test_gltf_single_frame(tmp_path, garment):
+    frames, faces, _ = garment
+    doc, blob = _read_gltf(write_gltf_animation(tmp_path / "still.glb", frames[:1], faces))
+    _close(_z_up(_gltf_mesh(doc, blob, "Garment")["frames"]), frames[:1])
+
+
+# ----------------------------------------------------------------------------- USD
+
+
+@pytest.mark.parametrize("ext", [".usda", ".usdc", ".usd"])
+def test_usd_time_samples_metadata_and_uvs(tmp_path, garment, body, ext):
+    from pxr import Usd, UsdGeom
+
+    frames, faces, uvs = garment
+    p = write_usd_animation(
+        tmp_path / f"drape{ext}", frames, faces, body_frames=body[0], body_faces=body[1], fps=24, uvs=uvs
+    )
+    stage = Usd.Stage.Open(str(p))
+    assert UsdGeom.GetStageUpAxis(stage) == UsdGeom.Tokens.z
+    assert UsdGeom.GetStageMetersPerUnit(stage) == 1.0
+    assert stage.GetTimeCodesPerSecond() == 24.0
+    assert (stage.GetStartTimeCode(), stage.GetEndTimeCode()) == (0.0, T - 1.0)
+    assert stage.GetDefaultPrim().GetPath() == "/Scene"
+    for prim_path, (v, f) in {"/Scene/Garment": (frames, faces), "/Scene/Body": body}.items():
+        mesh = UsdGeom.Mesh(stage.GetPrimAtPath(prim_path))
+        assert mesh, prim_path
+        points = mesh.GetPointsAttr()
+        assert points.GetTimeSamples() == [float(k) for k in range(T)]
+        for k in range(T):
+            _close(np.asarray(points.Get(float(k))), v[k])
+        assert list(mesh.GetFaceVertexCountsAttr().Get()) == [3] * len(f)
+        np.testing.assert_array_equal(np.asarray(mesh.GetFaceVertexIndicesAttr().Get()), f.ravel())
+        assert mesh.GetSubdivisionSchemeAttr().Get() == UsdGeom.Tokens.none
+    st = UsdGeom.PrimvarsAPI(stage.GetPrimAtPath("/Scene/Garment")).GetPrimvar("st")
+    assert st and st.GetInterpolation() == UsdGeom.Tokens.vertex
+    _close(np.asarray(st.Get()), uvs)
+    assert sorted(q.name for q in tmp_path.iterdir()) == [p.name]  # no temp files left
+
+
+# ----------------------------------------------------------------------------- video
+
+
+@pytest.mark.parametrize("ext", [".mp4", ".gif"])
+def test_preview_frame_count(tmp_path, garment, body, ext):
+    import imageio.v2 as iio
+
+    frames, faces, _ = garment
+    p = write_preview(tmp_path / f"preview{ext}", frames, faces, body_frames=body[0], body_faces=body[1], size=64)
+    if ext == ".gif":
+        video = iio.mimread(p)
+        assert len(video) == T
+        assert {im.shape[:2] for im in video} == {video[0].shape[:2]} and video[0].shape[0] == 64
+        assert not np.array_equal(video[0], video[1])  # the garment moves
+        from PIL import Image
+
+        with Image.open(p) as gif:
+            assert abs(gif.info["duration"] - 1000 / 15) <= 10  # GIF delays are whole centiseconds
+    else:
+        reader = iio.get_reader(p, format="FFMPEG")
+        try:
+            assert reader.count_frames() == T
+            meta = reader.get_meta_data()
+            h_w = meta["size"][::-1]
+            assert meta["fps"] == pytest.approx(15.0)
+        finally:
+            reader.close()
+        assert h_w[0] % 16 == 0 and h_w[1] % 16 == 0
+
+
+def test_preview_caps_frames(tmp_path, garment):
+    import imageio.v2 as iio
+
+    frames, faces, _ = garment
+    p = export_animation(tmp_path / "p.gif", frames, faces, size=32, max_frames=2)[0]
+    assert len(iio.mimread(p)) == 2
+
+
+# ----------------------------------------------------------------------------- validation
+
+
+def _bad_cases(frames, faces, uvs, body):
+    nan = frames.copy()
+    nan[2, 5, 1] = np.nan
+    return {
+        "nan frames": dict(frames=nan),
+        "one frame without T": dict(frames=frames[0]),
+        "frames not xyz": dict(frames=frames[..., :2]),
+        "empty frames": dict(frames=frames[:0]),
+        "faces out of range": dict(faces=np.array([[0, 1, 9]])),
+        "negative face index": dict(faces=np.array([[0, -1, 2]])),
+        "faces not triangles": dict(faces=np.array([[0, 1, 2, 3]])),
+        "fractional faces": dict(faces=np.array([[0.0, 1.5, 2.0]])),
+        "body frame count": dict(body_frames=body[0][:2], body_faces=body[1]),
+        "body without faces": dict(body_frames=body[0]),
+        "body faces out of range": dict(body_frames=body[0], body_faces=body[1] + 100),
+        "uv shape": dict(uvs=uvs[:5]),
+        "fps": dict(fps=0),
+    }
+
+
+@pytest.mark.parametrize("ext", [".glb", ".usda", ".pc2", ".gif"])
+def test_bad_inputs_raise_value_error_and_write_nothing(tmp_path, garment, body, ext):
+    frames, faces, uvs = garment
+    for label, change in _bad_cases(frames, faces, uvs, body).items():
+        if ext == ".pc2" and label == "fps":
+            continue  # PC2 has no time base
+        if ext == ".gif" and label == "uv shape":
+            continue  # previews ignore UVs
+        kw = dict(frames=frames, faces=faces, uvs=uvs if ext != ".gif" else None) | change
+        with pytest.raises(ValueError) as info:
+            export_animation(tmp_path / f"out{ext}", **kw)
+        msg = str(info.value)
+        assert "\n" not in msg and msg, label
+        assert isinstance(info.value, ExportError), label
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_unsupported_extension_names_supported_ones(tmp_path, garment):
+    frames, faces, _ = garment
+    with pytest.raises(ValueError, match=r"\.glb.*\.usd.*\.pc2.*\.mp4") as info:
+        export_animation(tmp_path / "out.fbx", frames, faces)
+    assert "\n" not in str(info.value) and "'.fbx'" in str(info.value)
+    for writer, name in [(write_gltf_animation, "x.usd"), (write_usd_animation, "x.glb"), (write_preview, "x.avi")]:
+        with pytest.raises(ValueError, match="use one of"):
+            writer(tmp_path / name, frames, faces)
+    with pytest.raises(ValueError, match=r"\.pc2"):
+        write_pc2(tmp_path / "x", frames)
+    assert set(SUPPORTED_EXTENSIONS) == {".glb", ".gltf", ".usd", ".usda", ".usdc", ".pc2", ".mp4", ".gif"}
+
+
+@pytest.mark.parametrize("name", ["a.glb", "a.usdc", "a.pc2", "a.mp4"])
+def test_unwritable_folder_fails_before_work(tmp_path, garment, monkeypatch, name):
+    frames, faces, _ = garment
+    blocker = tmp_path / "not_a_folder"
+    blocker.write_text("a file where the output folder should be")
+    # the check comes before validation and rendering: even invalid frames report the folder
+    import garsim.geometry.render as render
+
+    monkeypatch.setattr(render, "render_image", lambda *a, **k: pytest.fail("rendered before checking the folder"))
+    with pytest.raises(ValueError, match="output folder"):
+        export_animation(blocker / "sub" / name, frames[..., :2], faces)
+
+
+def test_read_only_folder_fails(tmp_path, garment):
+    import os
+
+    frames, faces, _ = garment
+    ro = tmp_path / "ro"
+    ro.mkdir()
+    ro.chmod(0o500)
+    try:
+        probe = ro / "probe"
+        try:
+            probe.write_text("")
+            probe.unlink()
+            pytest.skip("running with privileges that ignore folder permissions")
+        except PermissionError:
+            pass
+        with pytest.raises(ValueError, match="not writable"):
+            write_usd_animation(ro / "a.usda", frames, faces)
+        with pytest.raises(ValueError, match="not writable"):
+            write_obj_sequence(ro, frames, faces)
+    finally:
+        ro.chmod(0o700)
+        assert os.listdir(ro) == []
