@@ -3,7 +3,8 @@ import pytest
 import trimesh
 
 from garsim import GarSim, MeshError
-from garsim.api import make_sample, mesh_pair_prior
+from garsim.api import make_sample
+from garsim.bodies.prior import mesh_pair_prior
 from garsim.bodies.poses import PoseSampler
 from garsim.bodies.prior import garment_prior
 from garsim.garments.templates import make_garment
@@ -116,3 +117,49 @@ def test_a_garment_the_simplifier_rejects_still_gets_a_prediction(anny_body, sce
     out = GarSim(fake, collision_margin=None, max_vertices=400).drape(
         (c.vertices, anny_body.faces), (t.vertices, anny_body.faces), (dense.vertices, dense.faces))
     assert fake.sizes[-1] == len(dense.vertices) and out.shape == dense.vertices.shape
+
+
+def test_y_up_centimetre_input_round_trips_to_the_z_up_result(anny_body, scene):
+    """A Blender-style scene (Y up, centimetres) with up='y', units='cm' gives the Z-up metre result, converted."""
+    from garsim.geometry.io import z_up_to_y_up
+
+    c, t, g = scene
+    sim = GarSim.prior_only()
+    ref = sim.drape((c.vertices, anny_body.faces), (t.vertices, anny_body.faces), (g.vertices, g.faces))
+
+    def blender(v):
+        return z_up_to_y_up(np.asarray(v, dtype=np.float64)) * 100.0
+
+    out = sim.drape((blender(c.vertices), anny_body.faces), (blender(t.vertices), anny_body.faces),
+                    (blender(g.vertices), g.faces), up="y", units="cm")
+    np.testing.assert_allclose(out, blender(ref), atol=1e-3)  # 0.01 mm in centimetres
+
+
+def test_plainly_wrong_axis_units_or_far_garment_are_refused(anny_body, scene):
+    from garsim.geometry.io import z_up_to_y_up
+
+    c, t, g = scene
+    sim = GarSim.prior_only()
+    lying = z_up_to_y_up(c.vertices)
+    with pytest.raises(MeshError, match="up='y'"):
+        sim.drape((lying, anny_body.faces), (lying, anny_body.faces), (z_up_to_y_up(g.vertices), g.faces))
+    with pytest.raises(MeshError, match="units='cm'"):
+        sim.drape((c.vertices * 100, anny_body.faces), (t.vertices * 100, anny_body.faces), (g.vertices * 100, g.faces))
+    with pytest.raises(MeshError, match="draped on the canonical body"):
+        sim.drape((c.vertices, anny_body.faces), (t.vertices, anny_body.faces), (g.vertices + [1.0, 0, 0], g.faces))
+
+
+def test_pinned_vertices_follow_the_prior_and_sequences_match_single_drapes(anny_body, scene):
+    from garsim.model.config import GarSimConfig
+    from garsim.model.garsim import GarSimModel
+
+    c, t, g = scene
+    sim = GarSim(GarSimModel(GarSimConfig(latent=16, edge_latent=8, mlp_hidden=16, num_steps=1)).eval())
+    pins = np.flatnonzero(g.pinned)
+    bodies = [(c.vertices, anny_body.faces), (t.vertices, anny_body.faces)]
+    out = sim.drape(bodies[0], bodies[1], (g.vertices, g.faces), pinned=pins)
+    prior = GarSim.prior_only().drape(bodies[0], bodies[1], (g.vertices, g.faces))
+    np.testing.assert_array_equal(out[pins], prior[pins])
+    seq = sim.drape_sequence(bodies[0], [c.vertices, t.vertices], (g.vertices, g.faces), pinned=pins)
+    assert seq.shape == (2, len(g.vertices), 3)
+    np.testing.assert_allclose(seq[1], out, atol=1e-6)

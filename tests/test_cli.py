@@ -56,3 +56,27 @@ def test_errors_are_reported_not_raised(tmp_path, capsys):
 def test_demo(tmp_path):
     assert main(["demo", "--out", str(tmp_path), "--vertices", "600"]) == 0
     assert (tmp_path / "demo_grid.png").exists() and len(list(tmp_path.glob("*.obj"))) == 12
+
+
+def test_animate_writes_an_animation_matching_single_drapes(tmp_path, anny_body):
+    """`garsim animate --motion` writes a GLB whose frames are the per-frame drapes; bad extensions fail first."""
+    from garsim import GarSim
+    from garsim.bodies.poses import batched_matrices, motion, stack_poses
+    from garsim.garments.templates import make_garment
+    from garsim.geometry.io import save_mesh
+
+    g = make_garment("skirt", anny_body, target_vertices=300)
+    path = tmp_path / "skirt.obj"
+    save_mesh(path, g.vertices, g.faces)
+    assert main(["animate", "--garment", str(path), "--motion", "raise_arms", "--frames", "4", "--prior-only",
+                 "--quiet", "--out", str(tmp_path / "a.pc2")]) == 0
+    from garsim.export import read_pc2
+
+    frames, _, _ = read_pc2(tmp_path / "a.pc2")
+    bodies = anny_body.pose_batch(batched_matrices(stack_poses(motion("raise_arms", 4))))[0]
+    can = anny_body.canonical().vertices
+    last = GarSim.prior_only().drape((can, anny_body.faces), (bodies[-1], anny_body.faces), (g.vertices, g.faces))
+    assert frames.shape == (4, len(g.vertices), 3)
+    np.testing.assert_allclose(frames[-1], last, atol=1e-5)
+    assert main(["animate", "--garment", str(path), "--motion", "walk", "--out", str(tmp_path / "a.fbx")]) != 0
+    assert not (tmp_path / "a.fbx").exists()
