@@ -9,12 +9,11 @@ import pytest
 
 from garsim.garments.implicit import (
     IMPLICIT_KINDS,
-    border_loops,
     make_implicit_garment,
     sample_implicit_params,
 )
 from garsim.geometry.inside import InsideTester
-from garsim.geometry.mesh import vertex_normals
+from garsim.geometry.mesh import border_loops, vertex_normals
 
 LOOPS = {"skirt": 2, "trousers": 3, "tshirt": 4, "longsleeve": 4, "top": 4, "dress": 4}
 

@@ -8,7 +8,8 @@ import pytest
 from garsim.bodies.anny import AnnyBody
 from garsim.garments.garment import Garment
 from garsim.garments.remesh import BarycentricMap, decimate, transfer_barycentric
-from garsim.garments.templates import TemplateBody, border_loops, make_garment
+from garsim.garments.templates import TemplateBody, make_garment
+from garsim.geometry.mesh import border_loops
 
 
 @pytest.fixture(scope="module")

@@ -11,14 +11,13 @@ from garsim.bodies.anny import AnnyBody
 from garsim.garments.templates import (
     PARAMS,
     TemplateBody,
-    border_loops,
     garment_params,
     make_garment,
     make_garment_from_arrays,
     sample_garment_params,
 )
 from garsim.geometry.inside import InsideTester
-from garsim.geometry.mesh import face_normals
+from garsim.geometry.mesh import border_loops, face_normals
 from garsim.geometry.proximity import nearest_vertices, signed_offset_to_nearest
 
 KINDS = ("skirt", "top", "tshirt", "trousers", "dress")

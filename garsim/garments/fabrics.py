@@ -95,7 +95,7 @@ MIN_HINGE_AREA_RATIO = 0.1
 """Floor of (A1 + A2) / L² in :func:`edge_bending_stiffness` (an equilateral pair has 0.87)."""
 
 
-def get_fabric(fabric: "str | Fabric") -> Fabric:
+def get_fabric(fabric: str | Fabric) -> Fabric:
     """A preset by name (case-insensitive), or a given ``Fabric`` unchanged."""
     if isinstance(fabric, Fabric):
         return fabric
@@ -109,7 +109,7 @@ def fabric_from_values(values: dict[str, float], name: str = "custom") -> Fabric
     return Fabric(name=name, **values)
 
 
-def interpolate_fabric(a: "str | Fabric", b: "str | Fabric", t: float, name: str = "custom") -> Fabric:
+def interpolate_fabric(a: str | Fabric, b: str | Fabric, t: float, name: str = "custom") -> Fabric:
     """The fabric at ``t`` in [0, 1] between ``a`` and ``b``: log-linear in bending, density and stretch,
     linear in the rest."""
     if not (0.0 <= t <= 1.0):
@@ -125,14 +125,14 @@ def interpolate_fabric(a: "str | Fabric", b: "str | Fabric", t: float, name: str
     return Fabric(name=name, **out)
 
 
-def stiffness_coordinate(fabric: "str | Fabric") -> float:
+def stiffness_coordinate(fabric: str | Fabric) -> float:
     """Where a fabric's bending rigidity lies on the log scale from silk (0) to leather (1) (may be outside)."""
     b = get_fabric(fabric).bending
     lo, hi = math.log(FABRICS["silk"].bending), math.log(FABRICS["leather"].bending)
     return (math.log(b) - lo) / (hi - lo)
 
 
-def nearest_preset(fabric: "str | Fabric") -> str:
+def nearest_preset(fabric: str | Fabric) -> str:
     """The preset name closest to ``fabric`` in log bending rigidity."""
     b = math.log(get_fabric(fabric).bending)
     return min(PRESET_NAMES, key=lambda n: abs(math.log(FABRICS[n].bending) - b))

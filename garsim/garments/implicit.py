@@ -38,7 +38,7 @@ from scipy.spatial import ConvexHull, cKDTree
 
 from garsim.garments.garment import Garment
 from garsim.geometry.inside import InsideTester
-from garsim.geometry.mesh import boundary_edges, face_areas, face_normals, vertex_normals
+from garsim.geometry.mesh import border_loops, face_areas, face_normals, vertex_normals
 
 IMPLICIT_KINDS: tuple[str, ...] = ("skirt", "top", "tshirt", "longsleeve", "trousers", "dress")
 
@@ -692,18 +692,6 @@ def _largest_component(v: np.ndarray, f: np.ndarray) -> tuple[np.ndarray, np.nda
     remap = np.full(n, -1, dtype=np.int64)
     remap[used] = np.arange(len(used))
     return v[used], remap[f]
-
-
-def border_loops(faces: np.ndarray) -> list[np.ndarray]:
-    """Vertex index sets of the border loops (connected components of the boundary edges)."""
-    be = boundary_edges(faces)
-    if len(be) == 0:
-        return []
-    verts, inv = np.unique(be.ravel(), return_inverse=True)
-    e = inv.reshape(-1, 2)
-    adj = coo_matrix((np.ones(len(e)), (e[:, 0], e[:, 1])), shape=(len(verts), len(verts)))
-    n, lab = connected_components(adj, directed=False)
-    return [verts[lab == i] for i in range(n)]
 
 
 def _remesh(v: np.ndarray, f: np.ndarray, target: int, h: float) -> tuple[np.ndarray, np.ndarray]:

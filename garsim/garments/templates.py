@@ -14,14 +14,13 @@ waist tube at a crotch seam shared by both legs.
 from __future__ import annotations
 
 import math
-import time
 from dataclasses import asdict, dataclass, fields
 from typing import Any, ClassVar
 
 import numpy as np
 
 from garsim.garments.garment import Garment
-from garsim.geometry.mesh import boundary_edges, vertex_normals
+from garsim.geometry.mesh import vertex_normals
 from garsim.geometry.proximity import nearest_vertices
 
 PART_TORSO, PART_HEAD, PART_ARM_L, PART_ARM_R, PART_LEG_L, PART_LEG_R = range(6)
@@ -110,12 +109,12 @@ class TemplateBody:
         skin_indices: np.ndarray,
         skin_weights: np.ndarray | None,
         bone_labels: list[str],
-    ) -> "TemplateBody":
+    ) -> TemplateBody:
         """Body parts from the dominant skinning bone of each vertex (Anny/MakeHuman bone names)."""
         return cls(vertices, faces, body_parts(vertices, skin_indices, skin_weights, bone_labels))
 
     @classmethod
-    def from_anny(cls, body: Any) -> "TemplateBody":
+    def from_anny(cls, body: Any) -> TemplateBody:
         """The canonical T-pose of an :class:`~garsim.bodies.anny.AnnyBody`."""
         return cls.from_skinning(
             body.canonical().vertices, body.faces, body.skin_indices, body.skin_weights, body.bone_labels
@@ -492,12 +491,6 @@ def _angle_at_x(
 # ---------------------------------------------------------------------------------------------
 # Torso tube with strap / shoulder-panel arcs
 # ---------------------------------------------------------------------------------------------
-@dataclass
-class _Tube:
-    rings: np.ndarray  # (R, n) vertex indices, top ring first
-    angles: np.ndarray
-    strap_cols: dict[str, tuple[np.ndarray, np.ndarray]] | None = None  # side -> (front, back) indices
-    side_arcs: dict[str, np.ndarray] | None = None  # side -> indices front corner -> back corner
 
 
 def _arc_angles(breaks: list[float], counts: list[int]) -> tuple[np.ndarray, list[np.ndarray]]:
@@ -1050,31 +1043,3 @@ def make_garment_from_arrays(
     """:func:`make_garment` for any canonical body given as arrays plus its skinning bones."""
     tb = TemplateBody.from_skinning(body_vertices, body_faces, skin_indices, skin_weights, bone_labels)
     return make_garment(kind, tb, params, target_vertices)
-
-
-def garment_borders(garment: Garment) -> list[np.ndarray]:
-    """Border loops (vertex index arrays) of a garment mesh."""
-    return border_loops(garment.faces)
-
-
-def border_loops(faces: np.ndarray) -> list[np.ndarray]:
-    """Connected loops of boundary edges, each as an array of vertex indices."""
-    import scipy.sparse as sp
-    from scipy.sparse.csgraph import connected_components
-
-    e = boundary_edges(faces)
-    if len(e) == 0:
-        return []
-    verts, inv = np.unique(e.ravel(), return_inverse=True)
-    inv = inv.reshape(-1, 2)
-    adj = sp.coo_matrix((np.ones(len(inv)), (inv[:, 0], inv[:, 1])), shape=(len(verts), len(verts)))
-    ncomp, labels = connected_components(adj, directed=False)
-    return [verts[labels == c] for c in range(ncomp)]
-
-
-def timed_build(kind: str, body: Any, target_vertices: int = 2500) -> tuple[Garment, float]:
-    """Build a default ``kind`` template and return it with its build time in seconds."""
-    tb = _as_template_body(body)
-    t0 = time.perf_counter()
-    g = make_garment(kind, tb, None, target_vertices)
-    return g, time.perf_counter() - t0

@@ -122,3 +122,17 @@ def vertex_rings(vertices: np.ndarray, faces: np.ndarray, k: int) -> np.ndarray:
     keep = rank < k - 1
     tab[src[keep], 1 + rank[keep]] = dst[keep]
     return tab
+
+
+def border_loops(faces: np.ndarray) -> list[np.ndarray]:
+    """Vertex index sets of the border loops (connected components of the boundary edges)."""
+    from scipy.sparse.csgraph import connected_components
+
+    e = boundary_edges(faces)
+    if len(e) == 0:
+        return []
+    verts, inv = np.unique(e.ravel(), return_inverse=True)
+    inv = inv.reshape(-1, 2)
+    adj = sp.coo_matrix((np.ones(len(inv)), (inv[:, 0], inv[:, 1])), shape=(len(verts), len(verts)))
+    ncomp, labels = connected_components(adj, directed=False)
+    return [verts[labels == c] for c in range(ncomp)]
