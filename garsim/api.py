@@ -140,7 +140,7 @@ def make_sample(
     )
 
 
-_COARSE = ContentCache(8)  # per garment: its decimated copy and the maps both ways
+_COARSE = ContentCache(8, scope="garment")  # per garment: its decimated copy and the maps both ways
 
 
 def _coarse_copy(sample: Sample, max_vertices: int) -> tuple[Garment, BarycentricMap, BarycentricMap]:

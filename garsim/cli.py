@@ -31,9 +31,17 @@ def _write_json(path: str | Path, obj: object) -> Path:
 def cmd_demo(args: argparse.Namespace) -> int:
     from garsim.demo import DemoConfig, run_demo
 
-    outputs = run_demo(DemoConfig(out=Path(args.out), seed=args.seed, target_vertices=args.vertices))
+    outputs = run_demo(DemoConfig(out=Path(args.out), seed=args.seed, target_vertices=args.vertices,
+                                  frames=args.frames))
     for path in outputs:
         print(path)
+    return 0
+
+
+def cmd_view(args: argparse.Namespace) -> int:
+    from garsim.view import serve
+
+    serve(args.path, host=args.host, port=args.port, block=True)
     return 0
 
 
@@ -222,12 +230,22 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("-v", "--verbose", action="store_true", help="log at INFO level")
     sub = parser.add_subparsers(dest="command", required=True)
 
-    p = sub.add_parser("demo", help="drape the five garment types on two body shapes; write OBJ + PNG")
+    p = sub.add_parser("demo", help="drape six garment families on two body shapes in everyday poses; write OBJ, "
+                                    "a PNG grid, and a walk animation as GLB, USDC and GIF")
     p.add_argument("--out", default="demo_out", help="output folder")
     p.add_argument("--seed", type=int, default=0, help="seed of the target poses")
     p.add_argument("--vertices", type=int, default=800,
                    help="garment resolution (vertices; the shipped model was trained at ~230 and tested at 800)")
+    p.add_argument("--frames", type=int, default=24, help="frames of the walk animation")
     p.set_defaults(func=cmd_demo)
+
+    p = sub.add_parser("view", help="interactive browser viewer of a drape or animation (needs garsim[view])",
+                       epilog="example: garsim view demo_out/walk_dress.npz  (then open http://127.0.0.1:8080)")
+    p.add_argument("path", help="a .glb/.gltf written by garsim, an .npz with 'frames' and 'faces' (optional "
+                                "'body_frames', 'body_faces', 'prior_frames'), a .pc2, an OBJ, or a folder of OBJs")
+    p.add_argument("--port", type=int, default=8080, help="port (the next free one if taken)")
+    p.add_argument("--host", default="127.0.0.1", help="address to listen on (0.0.0.0: every interface)")
+    p.set_defaults(func=cmd_view)
 
     p = sub.add_parser("drape", help="drape a garment mesh from a canonical body onto a target body")
     p.add_argument("--canonical", required=True, help="canonical body mesh (OBJ/PLY/GLB)")

@@ -50,7 +50,7 @@ MAX_DEFAULT_STRETCH = 1.15
 """The derived default never exceeds this (a very soft custom fabric gets up to it)."""
 SEARCH_RADIUS = 0.008
 """m: obstacle triangles are split until each piece fits in a ball of this radius around its centroid."""
-BAND = 0.01
+BAND = 0.004
 """m: vertices within ``margin`` + this of the obstacle get exact contact half-spaces for the sweeps."""
 MAX_ROUNDS = 12
 """Rounds of ``iterations`` sweeps at most; a round ends with fresh exact queries for moved vertices."""
@@ -132,6 +132,9 @@ class _Obstacle:
         cen = pts.mean(1)
         self.radius = float(np.linalg.norm(pts - cen[:, None], axis=2).max()) if len(pts) else 0.0
         self.tree = cKDTree(cen)
+        self.vpos = v
+        self.vnormal = vn / np.maximum(np.linalg.norm(vn, axis=1, keepdims=True), 1e-30)
+        self.vtree = cKDTree(v)
 
         # pseudo-normal of each piece feature: corner c, edge opposite corner c, interior
         nz = bary > 0  # (P, corner, parent vertex): exact zeros survive halving
@@ -195,51 +198,107 @@ class _Obstacle:
         rows = np.arange(len(p))
         return (np.sqrt(d2q[rows, best]), cand[rows, best], v[rows, best], w[rows, best], q[rows, best])
 
-    def query(self, points: np.ndarray, band: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    def query(
+        self, points: np.ndarray, band: float, far_outside: np.ndarray | None = None, reach: float = 0.0
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """Signed distance (negative inside), closest point, outward unit normal and an ``exact`` flag.
 
-        Exact for every point within ``band`` of the surface and every point found inside; a point
-        farther out gets a lower bound on its distance (>= band), its closest point and normal are
-        then approximate (``exact`` False).
+        Exact for every point within ``band`` of the surface and every point found inside. A point
+        with no piece centroid within ``band`` + piece radius is at least ``band`` away; it is
+        classified by its nearest obstacle vertex's pseudo-normal and, if that says inside, resolved
+        exactly; otherwise it is reported at distance ``band`` with ``exact`` False (closest point
+        and normal then undefined: zeros). ``far_outside`` (M,) bool marks points known not to be
+        deeper than ``band`` (their far case needs no sign test). With ``reach`` > ``band``, a far
+        point's reported distance is a lower bound up to ``reach`` (nearest piece centroid - radius)
+        and its sign test uses that piece.
         """
         p = np.asarray(points, dtype=np.float64)
         m = len(p)
-        dist = np.empty(m)
-        piece = np.empty(m, dtype=np.int64)
-        v = np.empty(m)
-        w = np.empty(m)
-        close = np.empty((m, 3))
+        sdist = np.full(m, float(band))
+        close = np.zeros((m, 3))
+        normal = np.zeros((m, 3))
         exact = np.zeros(m, dtype=bool)
-        lower = np.full(m, np.inf)
-        todo = np.arange(m)
-        k = min(12, self.num_pieces)
-        inside_check = np.zeros(m, dtype=bool)  # far points that looked inside: resolved without the band
+        if m == 0:
+            return sdist, close, normal, exact
+        # near points: every piece that can hold a surface point within band lies within ub
+        near, best, far = self._search(p, np.arange(m), float(band) + self.radius)
+        if far_outside is not None and len(far):
+            far = far[~np.asarray(far_outside, dtype=bool)[far]]
+        if len(far) and reach > band:
+            # a distance lower bound (nearest piece centroid within reach) and a sign from that piece
+            dc, pc1 = self.tree.query(p[far], k=1, distance_upper_bound=reach + self.radius)
+            got = np.isfinite(dc)
+            sdist[far] = np.maximum(band, np.where(got, dc, reach + self.radius) - self.radius)
+            looks_inside = np.zeros(len(far), dtype=bool)
+            if got.any():
+                fg = far[got]
+                pcg = pc1[got].astype(np.int64)[:, None]
+                _, pcg, vg, wg, qg = self._closest(p[fg], pcg)
+                looks_inside[got] = self._sign(p[fg], qg, pcg, vg, wg) < 0
+            rest = ~got
+        else:
+            looks_inside = np.zeros(len(far), dtype=bool)
+            rest = np.ones(len(far), dtype=bool)
+        if rest.any():
+            _, vi = self.vtree.query(p[far[rest]], k=1)
+            looks_inside[rest] = np.einsum("md,md->m", p[far[rest]] - self.vpos[vi], self.vnormal[vi]) < 0
+        deep = far[looks_inside]
+        if len(deep):
+            found, best2, _ = self._search(p, deep, np.inf)
+            near = np.concatenate([near, found])
+            best = tuple(np.concatenate([a, b]) for a, b in zip(best, best2))
+        if len(near):
+            _, pc, vv, ww, qq = best
+            sign = self._sign(p[near], qq, pc, vv, ww)
+            diff = p[near] - qq
+            nrm = np.linalg.norm(diff, axis=1)
+            feat_n = self._feature_normal(pc, vv, ww)
+            feat_n /= np.maximum(np.linalg.norm(feat_n, axis=1, keepdims=True), 1e-30)
+            use_diff = (nrm > 1e-12)[:, None]
+            normal[near] = np.where(use_diff, sign[:, None] * diff / np.maximum(nrm, 1e-30)[:, None], feat_n)
+            sdist[near] = sign * nrm
+            close[near] = qq
+            exact[near] = True
+        return sdist, close, normal, exact
+
+    def _search(self, p: np.ndarray, todo: np.ndarray, ub: float) -> tuple[np.ndarray, tuple, np.ndarray]:
+        """Exact closest pieces of the points ``p[todo]``, unless proven farther than ``ub - radius``.
+
+        Returns (resolved indices, their (dist, piece, v, w, closest), far indices).
+        """
+        res_idx, res, far_idx = [], [], []
+        k = min(8, self.num_pieces)
         while len(todo):
-            dc, cand = self.tree.query(p[todo], k=k)
+            dc, cand = self.tree.query(p[todo], k=k, distance_upper_bound=ub)
             dc = np.asarray(dc).reshape(len(todo), k)
             cand = np.asarray(cand, dtype=np.int64).reshape(len(todo), k)
+            has = np.isfinite(dc[:, 0])  # no piece centroid within ub: farther than ub - radius
+            if (~has).any():
+                far_idx.append(todo[~has])
+            todo, dc, cand = todo[has], dc[has], cand[has]
+            if not len(todo):
+                break
+            valid = np.isfinite(dc)
+            cand = np.where(valid, cand, cand[:, :1])  # pad with the first candidate
             dd, pc, vv, ww, qq = self._closest(p[todo], cand)
-            dist[todo], piece[todo], v[todo], w[todo], close[todo] = dd, pc, vv, ww, qq
-            lb = dc[:, -1] - self.radius if k < self.num_pieces else np.full(len(todo), np.inf)
+            full = valid[:, -1] & (k < self.num_pieces)
+            lb = np.where(full, dc[:, -1] - self.radius, np.inf)  # bound for every untested piece
             proven = dd <= lb
-            exact[todo] = proven
-            lower[todo] = np.minimum(dd, lb)
-            far = ~proven & (lb >= band) & ~inside_check[todo]
-            if far.any():  # classify by the best candidate; resolve exactly if that says inside
-                sd = self._sign(p[todo[far]], qq[far], pc[far], vv[far], ww[far])
-                inside_check[todo[far][sd < 0]] = True
-                far[far] = sd >= 0
+            far = ~proven & (np.minimum(dd, lb) > ub - self.radius)
+            res_idx.append(todo[proven])
+            res.append((dd[proven], pc[proven], vv[proven], ww[proven], qq[proven]))
+            if far.any():
+                far_idx.append(todo[far])
             todo = todo[~proven & ~far]
             k = min(4 * k, self.num_pieces)
-        sign = self._sign(p, close, piece, v, w)
-        diff = p - close
-        nrm = np.linalg.norm(diff, axis=1)
-        feat_n = self._feature_normal(piece, v, w)
-        feat_n /= np.maximum(np.linalg.norm(feat_n, axis=1, keepdims=True), 1e-30)
-        use_diff = nrm > 1e-12
-        normal = np.where(use_diff[:, None], sign[:, None] * diff / np.maximum(nrm, 1e-30)[:, None], feat_n)
-        sdist = np.where(exact, sign * nrm, np.maximum(lower, band))
-        return sdist, close, normal, exact
+        if res_idx:
+            best = tuple(np.concatenate([r[i] for r in res]) for i in range(5))
+            idx = np.concatenate(res_idx)
+        else:
+            best = (np.zeros(0), np.zeros(0, np.int64), np.zeros(0), np.zeros(0), np.zeros((0, 3)))
+            idx = np.zeros(0, dtype=np.int64)
+        far = np.concatenate(far_idx) if far_idx else np.zeros(0, dtype=np.int64)
+        return idx, best, far
 
     def _feature_normal(self, piece: np.ndarray, v: np.ndarray, w: np.ndarray) -> np.ndarray:
         u = 1.0 - v - w
@@ -395,25 +454,31 @@ def refine(
 
     # exact state of every vertex
     x = x0.copy()
-    d, c, nrm, _ = obs.query(x, band)
+    def reach(x):  # how far a vertex distance matters for the edge-sample bound below
+        if len(e_mov) == 0:
+            return band
+        return float(min(0.75 * np.linalg.norm(x[e_mov[:, 1]] - x[e_mov[:, 0]], axis=1).max() + BAND, 0.1))
+
+    d, c, nrm, _ = obs.query(x, band, reach=reach(x))
     xq = x.copy()  # positions at the last query
 
     def sample_state(x, d):
-        """Candidate edge samples that may lie deeper than ``margin`` inside: (edge, t, dist, closest, normal)."""
+        """Edge samples that may lie deeper than ``margin`` inside: (edge, t, dist, closest, normal) or None."""
         if len(e_mov) == 0:
             return None
         i, j = e_mov[:, 0], e_mov[:, 1]
         length = np.linalg.norm(x[j] - x[i], axis=1)
-        di, dj = np.maximum(d[i], 0.0), np.maximum(d[j], 0.0)
-        # 1-Lipschitz distance: the sample at t is at least max(d_i - t L, d_j - (1 - t) L) from the surface
+        di, dj = d[i], d[j]
+        # the distance is 1-Lipschitz: the sample at t is at least max(d_i - t L, d_j - (1 - t) L) from the surface
         bound = np.maximum(di[:, None] - ts[None] * length[:, None], dj[:, None] - (1 - ts[None]) * length[:, None])
-        ke, kt = np.nonzero(bound < band - margin)
+        ke, kt = np.nonzero(bound < -margin + 0.5 * BAND)
         if len(ke) == 0:
             return None
         t = ts[kt]
         s = (1 - t)[:, None] * x[i[ke]] + t[:, None] * x[j[ke]]
-        sd, sc, sn, _ = obs.query(s, band)
-        keep = sd < band - margin  # within reach of the -margin limit: keep as half-spaces
+        # a sample that cannot be deeper than BAND and has no surface within BAND is outside: skip its sign test
+        sd, sc, sn, _ = obs.query(s, BAND, far_outside=bound[ke, kt] > -BAND)
+        keep = sd < -margin + 0.5 * BAND  # near the -margin limit: kept as half-spaces for the sweeps
         return e_mov[ke[keep]], t[keep], sd[keep], sc[keep], sn[keep]
 
     def violated(x, d, samples) -> bool:
@@ -438,7 +503,7 @@ def refine(
     def requery(x, d, c, nrm, xq):
         moved = np.any(x != xq, axis=1)
         if moved.any():
-            dm, cm, nm, _ = obs.query(x[moved], band)
+            dm, cm, nm, _ = obs.query(x[moved], band, reach=reach(x))
             d, c, nrm = d.copy(), c.copy(), nrm.copy()
             d[moved], c[moved], nrm[moved] = dm, cm, nm
             xq = x.copy()

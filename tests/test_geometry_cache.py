@@ -43,3 +43,15 @@ def test_edited_body_is_never_served_stale():
     assert cached_vertex_normals(v, f) is n1 and not n1.flags.writeable
     mv, mf = as_mesh((v, f))
     assert as_mesh((v.copy(), f.copy()))[0] is mv and not mv.flags.writeable  # validated once, read-only
+
+
+def test_clear_all_empties_registered_caches_by_scope():
+    from garsim.geometry.cache import ContentCache, clear_all
+
+    body, garment = ContentCache(2), ContentCache(2, scope="garment")
+    body.put("b", 1)
+    garment.put("g", 2)
+    clear_all("garment")
+    assert len(garment) == 0 and body.peek("b") == 1
+    clear_all()
+    assert len(body) == 0

@@ -23,22 +23,14 @@ from typing import Any
 import numpy as np
 import torch
 
-from garsim import api
 from garsim.api import GarSim
 from garsim.bodies.prior import garment_prior
 from garsim.data.sample import Sample
-from garsim.geometry import proximity
-from garsim.model import inputs
-from garsim.model.inputs import clear_caches
+from garsim.geometry.cache import clear_all
+from garsim.model.inputs import build_graph
 
 DEFAULT_POSE: dict[str, list[float]] = {"upperleg01.L": [-0.5, 0.0, 0.0], "upperleg01.R": [0.3, 0.0, 0.0]}
 """Target pose used by the benchmark (a step: one thigh forward, one back), on top of Anny's T-pose."""
-
-
-def _clear_garment_caches() -> None:
-    proximity._QUERY_CACHE.clear()
-    inputs._GARMENT_CACHE.clear()
-    api._COARSE.clear()  # the API's decimated copy of a dense garment
 
 
 def _timed(fn) -> tuple[Any, float, float]:
@@ -53,7 +45,7 @@ def drape_once(model, body, canonical, target, garment_vertices, garment_faces, 
     prior = garment_prior(body, canonical, target, garment_vertices)
     c1 = time.process_time()
     sample = Sample(canonical.vertices, target.vertices, body.faces, garment_vertices, garment_faces, pinned, prior, fabric, kind)
-    graph = inputs.build_graph(sample, model.config, loss_inputs=False)
+    graph = build_graph(sample, model.config, loss_inputs=False)
     c2 = time.process_time()
     with torch.inference_mode():
         pred = model(graph).numpy()
@@ -106,11 +98,11 @@ def bench_inference(
     try:
         for n, gar in garments.items():
             args = (model, body, canonical, target, gar.vertices, gar.faces, gar.pinned, fabric, garment)
-            clear_caches()  # cold body: KD-tree, yaw frame and rings are built inside this call
+            clear_all()  # cold body: KD-tree, yaw frame and rings are built inside this call
             (_, _), first_wall, _ = _timed(lambda: drape_once(*args))
             wall, cpu, parts = [], [], []
             for _ in range(repeats):
-                _clear_garment_caches()  # each call pays for its own garment (search, kNN, edges)
+                clear_all("garment")  # each call pays for its own garment (search, kNN, edges)
                 (pred, part), w, c = _timed(lambda: drape_once(*args))
                 wall.append(w)
                 cpu.append(c)
@@ -128,7 +120,7 @@ def bench_inference(
             sim.drape(*mesh_args, fabric=fabric)
             api_cpu = []
             for _ in range(repeats):
-                _clear_garment_caches()
+                clear_all("garment")
                 _, _, c = _timed(lambda: sim.drape(*mesh_args, fabric=fabric))
                 api_cpu.append(c)
             if pred.shape != gar.vertices.shape or not np.isfinite(pred).all():

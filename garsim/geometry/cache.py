@@ -21,14 +21,28 @@ def content_key(*arrays: Any) -> tuple:
     return tuple(key)
 
 
-class ContentCache:
-    """A least-recently-used map of at most ``size`` entries."""
+_REGISTRY: list[ContentCache] = []
 
-    def __init__(self, size: int) -> None:
+
+def clear_all(scope: str | None = None) -> None:
+    """Empty every ContentCache of the process, or only those of one ``scope`` ("body", "garment", ...):
+    e.g. to time a cold first call, or a new garment on a known body."""
+    for cache in _REGISTRY:
+        if scope is None or cache.scope == scope:
+            cache.clear()
+
+
+class ContentCache:
+    """A least-recently-used map of at most ``size`` entries; every instance is registered for ``clear_all``."""
+
+    def __init__(self, size: int, scope: str = "body") -> None:
+        """``scope`` names what the entries belong to ("body": per body mesh; "garment": per garment)."""
         if size < 1:
             raise ValueError(f"cache size must be >= 1, got {size}")
         self.size = size
+        self.scope = scope
         self._items: OrderedDict[Hashable, Any] = OrderedDict()
+        _REGISTRY.append(self)
 
     def peek(self, key: Hashable) -> Any | None:
         """The cached value for ``key`` (marked recently used), or None."""

@@ -321,7 +321,7 @@ def save_mesh(
     return atomic_write_bytes(p, data.encode("utf-8") if isinstance(data, str) else data)
 
 
-_VALIDATED = ContentCache(8)
+_VALIDATED = ContentCache(8, scope="garment")  # validated meshes (garments and bodies)
 
 
 def _validated(vertices: Any, faces: Any, name: str) -> tuple[np.ndarray, np.ndarray]:

@@ -19,29 +19,6 @@ def cached_tree(points: np.ndarray) -> cKDTree:
     return _TREE_CACHE.get(content_key(arr), lambda: cKDTree(arr))
 
 
-_QUERY_CACHE = ContentCache(4)
-
-
-def cached_nearest(points: np.ndarray, vertices: np.ndarray, k: int = 1) -> tuple[np.ndarray, np.ndarray]:
-    """(N, k) distances and indices of the k nearest ``vertices`` to each point, single-threaded.
-
-    The tree is cached per vertex set (``cached_tree``) and the last few answers per (points,
-    vertices) content, so the prior's k-nearest query and the model's nearest-vertex query on
-    the same garment and body run the search once (a smaller k is a slice of a larger one).
-    """
-    pts = np.ascontiguousarray(points)
-    verts = np.ascontiguousarray(vertices)
-    key = content_key(pts, verts)
-    hit = _QUERY_CACHE.peek(key)
-    if hit is not None and hit[0].shape[1] >= k:
-        return hit[0][:, :k], hit[1][:, :k]
-    kk = min(k, len(verts))
-    dist, idx = cached_tree(verts).query(pts, k=kk)
-    dist = np.asarray(dist, dtype=np.float64).reshape(len(pts), kk)
-    idx = np.asarray(idx, dtype=np.int64).reshape(len(pts), kk)
-    return _QUERY_CACHE.put(key, (dist, idx))
-
-
 def nearest_vertices(points: np.ndarray, vertices: np.ndarray, k: int = 1) -> tuple[np.ndarray, np.ndarray]:
     """Indices and distances of the ``k`` nearest ``vertices`` to each point ((N,) or (N, k))."""
     tree = cached_tree(np.asarray(vertices, dtype=np.float64))
@@ -54,7 +31,7 @@ SOFT_ANCHOR_WIDTH = 0.04
 of the nearest one's (about a 4 cm patch of body surface around the closest point). Wider is smoother:
 between the legs (~20 cm apart) the anchor moves ~2 * 0.4 * 0.2 / width² m per m of garment motion
 across the medial plane, 50x at 4 cm (0.05 mm for a 1 µm change), 200x at 2 cm."""
-_SOFT_CACHE = ContentCache(8)
+_SOFT_CACHE = ContentCache(8, scope="garment")  # per garment (and body)
 
 
 def soft_anchor(points: np.ndarray, vertices: np.ndarray, width: float = SOFT_ANCHOR_WIDTH) -> sp.csr_matrix:

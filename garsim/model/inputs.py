@@ -22,7 +22,6 @@ Z and to translations. Full SO(3) equivariance is not wanted: gravity points dow
 
 from __future__ import annotations
 
-from collections import OrderedDict
 from collections.abc import Iterable, Sequence
 
 import numpy as np
@@ -34,28 +33,13 @@ from torch_geometric.data import Batch, Data
 from garsim.data.sample import Sample
 from garsim.garments.fabrics import FABRICS as FABRIC_PRESETS
 from garsim.garments.fabrics import Fabric, fabric_from_values, get_fabric
+from garsim.geometry.cache import ContentCache, content_key
 from garsim.geometry.mesh import directed_edges, face_normals, face_pairs, vertex_rings
 from garsim.geometry.proximity import cached_tree, soft_anchor
 from garsim.model.config import FABRIC_FEATURES, GarSimConfig
 
-_CACHE_SIZE = 8
-_BODY_CACHE: OrderedDict[tuple, "BodyFrame"] = OrderedDict()
-
-
-def _content_key(arr: np.ndarray) -> tuple:
-    """Cache key from an array's content (shape, dtype and a hash of its bytes): safe under mutation."""
-    return (arr.shape, arr.dtype.str, hash(arr.tobytes()))
-
-
-def _lru_get(cache: OrderedDict, key: tuple, make):
-    value = cache.get(key)
-    if value is None:
-        value = cache[key] = make()
-        if len(cache) > _CACHE_SIZE:
-            cache.popitem(last=False)
-    else:
-        cache.move_to_end(key)
-    return value
+_BODIES = ContentCache(8)  # per canonical body: its BodyFrame
+_GARMENTS = ContentCache(8, scope="garment")  # per template garment: mesh rings and receiver-sorted edges
 
 
 class BodyFrame:
@@ -90,14 +74,9 @@ def body_frame(body_canonical: np.ndarray, faces: np.ndarray, canonicalize_yaw: 
     """The cached BodyFrame of a canonical body (keyed by its vertices' content, faces compared), so
     an edited body is never served stale data."""
     arr = np.ascontiguousarray(body_canonical, dtype=np.float32)
-    f = np.asarray(faces, dtype=np.int64)
-    key = _content_key(arr) + (bool(canonicalize_yaw),)
-    hit = _BODY_CACHE.get(key)
-    if hit is not None and (hit.faces is f or (hit.faces.shape == f.shape and np.array_equal(hit.faces, f))):
-        _BODY_CACHE.move_to_end(key)
-        return hit
-    _BODY_CACHE.pop(key, None)
-    return _lru_get(_BODY_CACHE, key, lambda: BodyFrame(arr, f.copy(), canonicalize_yaw))
+    f = np.ascontiguousarray(faces, dtype=np.int64)
+    return _BODIES.get(content_key(arr, f) + (bool(canonicalize_yaw),),
+                       lambda: BodyFrame(arr, f.copy(), canonicalize_yaw))
 
 
 def body_yaw_frame(body_canonical: np.ndarray) -> np.ndarray:
@@ -176,7 +155,6 @@ def semantic_vector(
     return (1.0 - np.exp(-grid)).astype(np.float32)
 
 
-_GARMENT_CACHE: OrderedDict[tuple, tuple[np.ndarray, np.ndarray]] = OrderedDict()
 
 
 def garment_topology(garment: np.ndarray, faces: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray]:
@@ -187,25 +165,14 @@ def garment_topology(garment: np.ndarray, faces: np.ndarray, k: int) -> tuple[np
     """
     g = np.ascontiguousarray(garment, dtype=np.float32)
     f = np.ascontiguousarray(faces, dtype=np.int64)
-    key = _content_key(g) + _content_key(f) + (int(k),)
+    key = content_key(g, f) + (int(k),)
 
     def make() -> tuple[np.ndarray, np.ndarray]:
         ei = directed_edges(f)
         ei = np.ascontiguousarray(ei[:, np.argsort(ei[1], kind="stable")])  # receiver-sorted (CSR mean)
         return vertex_rings(g, f, k), ei
 
-    return _lru_get(_GARMENT_CACHE, key, make)
-
-
-def clear_caches() -> None:
-    """Forget every cached body frame, garment topology, KD-tree and soft anchor."""
-    from garsim.geometry import proximity
-
-    _BODY_CACHE.clear()
-    _GARMENT_CACHE.clear()
-    proximity._TREE_CACHE.clear()
-    proximity._QUERY_CACHE.clear()
-    proximity._SOFT_CACHE.clear()
+    return _GARMENTS.get(key, make)
 
 
 class GarmentGraph(Data):
