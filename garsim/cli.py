@@ -39,9 +39,13 @@ def cmd_demo(args: argparse.Namespace) -> int:
 
 
 def cmd_view(args: argparse.Namespace) -> int:
-    from garsim.view import serve
+    from garsim.view import ViewerUnavailable, serve
 
-    serve(args.path, host=args.host, port=args.port, block=True)
+    try:
+        serve(args.path, host=args.host, port=args.port, block=True)
+    except ViewerUnavailable as exc:
+        print(exc, file=sys.stderr)
+        return 2
     return 0
 
 

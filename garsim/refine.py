@@ -48,7 +48,7 @@ DEFAULT_STRETCH = 1.10
 """Default edge-length limit (x rest length) for preset-like fabrics (membrane stiffness >= 3e3 N/m)."""
 MAX_DEFAULT_STRETCH = 1.15
 """The derived default never exceeds this (a very soft custom fabric gets up to it)."""
-SEARCH_RADIUS = 0.008
+SEARCH_RADIUS = 0.012
 """m: obstacle triangles are split until each piece fits in a ball of this radius around its centroid."""
 BAND = 0.004
 """m: vertices within ``margin`` + this of the obstacle get exact contact half-spaces for the sweeps."""

@@ -53,9 +53,31 @@ def test_errors_are_reported_not_raised(tmp_path, capsys):
 
 
 @pytest.mark.slow
-def test_demo(tmp_path):
-    assert main(["demo", "--out", str(tmp_path), "--vertices", "600"]) == 0
-    assert (tmp_path / "demo_grid.png").exists() and len(list(tmp_path.glob("*.obj"))) == 12
+def test_demo(tmp_path, capsys):
+    """The demo end to end on tiny settings: every family on both bodies, the grid, the walk animation."""
+    import struct
+
+    from garsim.demo import DEMO_BODIES, DEMO_GARMENTS
+
+    assert main(["demo", "--out", str(tmp_path), "--vertices", "300", "--frames", "3"]) == 0
+    out = capsys.readouterr().out
+    for body in DEMO_BODIES:
+        assert (tmp_path / f"{body}_body.obj").exists()
+        for kind in DEMO_GARMENTS:
+            assert trimesh.load(tmp_path / f"{body}_{kind}.obj", process=False).vertices.shape[0] > 100
+            assert f"{body} {kind}" in " ".join(out.split())  # a timing line per drape
+    png = (tmp_path / "demo.png").read_bytes()
+    assert png.startswith(b"\x89PNG") and len(png) > 10_000
+    for ext in (".glb", ".usdc", ".gif", ".npz"):
+        assert (tmp_path / f"walk_dress{ext}").stat().st_size > 0
+        assert str(tmp_path / f"walk_dress{ext}") in out
+    data = (tmp_path / "walk_dress.glb").read_bytes()
+    (json_len,) = struct.unpack_from("<I", data, 12)
+    doc = json.loads(data[20 : 20 + json_len])
+    assert doc["extras"]["frames"] == 3
+    assert all(len(m["primitives"][0]["targets"]) == 3 for m in doc["meshes"])
+    with np.load(tmp_path / "walk_dress.npz") as z:
+        assert z["frames"].shape[0] == z["prior_frames"].shape[0] == z["body_frames"].shape[0] == 3
 
 
 def test_animate_writes_an_animation_matching_single_drapes(tmp_path, anny_body):

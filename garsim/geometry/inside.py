@@ -96,13 +96,10 @@ class InsideTester:
     def __init__(
         self, body_vertices: np.ndarray, body_faces: np.ndarray, accuracy: float = 2.0, threshold: float = 0.5
     ) -> None:
+        from garsim.geometry.io import validate_mesh
+
         wp = quiet_warp()
-        v = _as_points(body_vertices, "body_vertices")
-        f = np.asarray(body_faces)
-        if f.ndim != 2 or f.shape[1] != 3 or len(f) == 0:
-            raise ValueError(f"body_faces must be a non-empty (F, 3) array, got {f.shape}")
-        if f.min() < 0 or f.max() >= len(v):
-            raise ValueError(f"body_faces index vertices outside [0, {len(v) - 1}]")
+        v, f = validate_mesh(body_vertices, body_faces, "body")
         self.num_vertices = len(v)
         self.accuracy = float(accuracy)
         self.threshold = float(threshold)

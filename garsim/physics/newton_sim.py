@@ -23,6 +23,7 @@ import numpy as np
 
 from garsim.garments.fabrics import Fabric, edge_bending_stiffness, get_fabric
 from garsim.garments.garment import Garment
+from garsim.geometry.io import validate_mesh
 from garsim.geometry.mesh import face_normals, face_pairs, unique_edges
 from garsim.geometry.proximity import nearest_vertices
 
@@ -83,17 +84,9 @@ class SimConfig:
 
 
 def _check_mesh(name: str, vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    v = np.ascontiguousarray(vertices, dtype=np.float32)
-    f = np.ascontiguousarray(faces, dtype=np.int32)
-    if v.ndim != 2 or v.shape[1] != 3 or len(v) == 0:
-        raise ValueError(f"{name} vertices must be a non-empty (N, 3) array, got shape {v.shape}")
-    if f.ndim != 2 or f.shape[1] != 3 or len(f) == 0:
-        raise ValueError(f"{name} faces must be a non-empty (F, 3) array, got shape {f.shape}")
-    if not np.isfinite(v).all():
-        raise ValueError(f"{name} vertices contain NaN/inf")
-    if f.min() < 0 or f.max() >= len(v):
-        raise ValueError(f"{name} faces index outside [0, {len(v)})")
-    return v, f
+    """``geometry.io.validate_mesh`` as the solver wants it: contiguous float32 vertices, int32 faces."""
+    v, f = validate_mesh(vertices, faces, name)
+    return np.ascontiguousarray(v, dtype=np.float32), np.ascontiguousarray(f, dtype=np.int32)
 
 
 def crop_body(

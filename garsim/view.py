@@ -1,0 +1,473 @@
+"""``garsim view``: an interactive browser viewer (viser) for drapes and animations.
+
+Reads a ``.glb``/``.gltf`` written by :mod:`garsim.export` (frames rebuilt from the morph targets), an ``.npz``
+with ``frames`` (T, N, 3) and ``faces`` (optional ``body_frames`` (T, Vb, 3) or (Vb, 3), ``body_faces``,
+``prior_frames`` (T, N, 3), ``fps``), a ``.pc2`` (+ the OBJ beside it, and ``<stem>_body.pc2``), one mesh
+file, or a folder of OBJs (one sequence, sorted by name; files whose name contains ``body`` / ``prior``
+are the body / the prior). The page has a frame slider with play, body and garment toggles and, when a prior
+is present, a prior-vs-prediction toggle and the correction ``|prediction - prior|`` as vertex colour.
+
+viser is an optional extra (``pip install 'garsim[view]'``), imported only by :func:`serve`.
+"""
+
+from __future__ import annotations
+
+import json
+import re
+import struct
+import threading
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+VIEWER_NEEDS = "garsim view needs viser: pip install 'garsim[view]'"
+GARMENT_RGB = (0.23, 0.46, 0.69)
+BODY_RGB = (200, 200, 200)
+
+
+class ViewerUnavailable(RuntimeError):
+    """viser is not installed."""
+
+
+@dataclass
+class ViewData:
+    """A garment sequence (Z up, metres) with an optional body sequence and prior."""
+
+    frames: np.ndarray  # (T, N, 3) float32
+    faces: np.ndarray  # (F, 3) int64
+    body_frames: np.ndarray | None = None  # (T, Vb, 3)
+    body_faces: np.ndarray | None = None
+    prior_frames: np.ndarray | None = None  # (T, N, 3)
+    fps: float = 30.0
+    name: str = ""
+
+    def __post_init__(self) -> None:
+        f = np.asarray(self.frames, dtype=np.float32)
+        if f.ndim == 2:
+            f = f[None]
+        if f.ndim != 3 or f.shape[-1] != 3 or len(f) == 0:
+            raise ValueError(f"{self.name}: garment frames must have shape (T, N, 3), got {np.shape(self.frames)}")
+        self.frames = f
+        self.faces = _faces(self.faces, f.shape[1], f"{self.name}: garment faces")
+        if self.body_frames is not None:
+            if self.body_faces is None:
+                raise ValueError(f"{self.name}: body frames without body faces")
+            b = np.asarray(self.body_frames, dtype=np.float32)
+            b = np.broadcast_to(b, (len(f), *b.shape)) if b.ndim == 2 else b
+            if b.ndim != 3 or b.shape[-1] != 3 or len(b) != len(f):
+                raise ValueError(f"{self.name}: body frames must have shape ({len(f)}, Vb, 3), got {b.shape}")
+            self.body_frames = b
+            self.body_faces = _faces(self.body_faces, b.shape[1], f"{self.name}: body faces")
+        if self.prior_frames is not None:
+            p = np.asarray(self.prior_frames, dtype=np.float32)
+            p = p[None] if p.ndim == 2 else p
+            if p.shape != f.shape:
+                raise ValueError(f"{self.name}: prior frames must have the garment's shape {f.shape}, got {p.shape}")
+            self.prior_frames = p
+        for what, a in (("garment", f), ("body", self.body_frames), ("prior", self.prior_frames)):
+            if a is not None and not np.isfinite(a).all():
+                raise ValueError(f"{self.name}: the {what} frames hold NaN or infinite values")
+        if not (np.isfinite(self.fps) and self.fps > 0):
+            self.fps = 30.0
+
+    @property
+    def num_frames(self) -> int:
+        return int(self.frames.shape[0])
+
+    def correction(self) -> np.ndarray | None:
+        """|prediction - prior| per frame and vertex (T, N), metres; None without a prior."""
+        if self.prior_frames is None:
+            return None
+        return np.linalg.norm(self.frames - self.prior_frames, axis=-1)
+
+
+def _faces(faces: Any, n: int, what: str) -> np.ndarray:
+    f = np.asarray(faces)
+    if f.ndim != 2 or f.shape[1] != 3 or f.dtype.kind not in "iu":
+        raise ValueError(f"{what} must be an (F, 3) integer array, got shape {f.shape} of {f.dtype}")
+    if f.size and (f.min() < 0 or f.max() >= n):
+        raise ValueError(f"{what} index vertices outside 0..{n - 1}")
+    return f.astype(np.int64)
+
+
+# ----------------------------------------------------------------------------- readers
+
+
+def _read_gltf_document(path: Path) -> tuple[dict, bytes]:
+    data = path.read_bytes()
+    if path.suffix.lower() == ".gltf":
+        import base64
+
+        doc = json.loads(data)
+        uri = doc["buffers"][0].get("uri", "")
+        if not uri.startswith("data:"):
+            raise ValueError(f"{path}: only .gltf files with an embedded (base64) buffer are supported")
+        return doc, base64.b64decode(uri.split(",", 1)[1])
+    if len(data) < 20:
+        raise ValueError(f"{path}: not a GLB file (too short)")
+    magic, version, total = struct.unpack_from("<III", data, 0)
+    if magic != 0x46546C67 or version != 2:
+        raise ValueError(f"{path}: not a glTF 2.0 binary (.glb)")
+    if total > len(data):
+        raise ValueError(f"{path}: truncated GLB ({len(data)} of {total} bytes)")
+    json_len, _ = struct.unpack_from("<II", data, 12)
+    doc = json.loads(data[20 : 20 + json_len])
+    blob = b""
+    if 28 + json_len <= len(data):
+        bin_len, _ = struct.unpack_from("<II", data, 20 + json_len)
+        blob = data[28 + json_len : 28 + json_len + bin_len]
+    return doc, blob
+
+
+_COMPONENTS = {5126: "<f4", 5125: "<u4", 5123: "<u2", 5121: "u1"}
+_WIDTHS = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4}
+
+
+def _accessor(doc: dict, blob: bytes, index: int) -> np.ndarray:
+    acc = doc["accessors"][index]
+    dtype = np.dtype(_COMPONENTS[acc["componentType"]])
+    width = _WIDTHS[acc["type"]]
+    count = int(acc["count"])
+    if "bufferView" not in acc:  # all zeros (sparse accessors are not used by garsim)
+        return np.zeros((count, width) if width > 1 else count, dtype=dtype)
+    view = doc["bufferViews"][acc["bufferView"]]
+    offset = view.get("byteOffset", 0) + acc.get("byteOffset", 0)
+    stride = view.get("byteStride", dtype.itemsize * width)
+    rows = np.ndarray((count, width), dtype=dtype, buffer=blob, offset=offset, strides=(stride, dtype.itemsize))
+    rows = np.array(rows)
+    return rows if width > 1 else rows[:, 0]
+
+
+def _gltf_mesh_frames(doc: dict, blob: bytes, mesh: dict) -> tuple[np.ndarray, np.ndarray]:
+    """(frames (T, V, 3), faces) of a mesh's first primitive: base POSITION + each morph target."""
+    prim = mesh["primitives"][0]
+    base = _accessor(doc, blob, prim["attributes"]["POSITION"]).astype(np.float64)
+    if "indices" in prim:
+        faces = _accessor(doc, blob, prim["indices"]).reshape(-1, 3)
+    else:
+        faces = np.arange(len(base)).reshape(-1, 3)
+    targets = prim.get("targets") or []
+    if targets:
+        frames = np.stack([base + _accessor(doc, blob, t["POSITION"]) for t in targets if "POSITION" in t])
+    else:
+        frames = base[None]
+    return frames.astype(np.float32), faces.astype(np.int64)
+
+
+def _z_up(points: np.ndarray) -> np.ndarray:
+    """glTF Y up -> Z up: (x, y, z) -> (x, -z, y), the inverse of garsim.export's rotation."""
+    return np.stack([points[..., 0], -points[..., 2], points[..., 1]], axis=-1)
+
+
+def load_gltf(path: str | Path) -> ViewData:
+    """A .glb/.gltf written by garsim.export (or any glTF whose meshes animate by morph targets)."""
+    p = Path(path)
+    doc, blob = _read_gltf_document(p)
+    meshes = doc.get("meshes") or []
+    if not meshes:
+        raise ValueError(f"{p}: the glTF holds no mesh")
+    roles: dict[str, dict] = {}
+    for m in meshes:
+        name = str(m.get("name", "")).lower()
+        role = "body" if "body" in name else "prior" if "prior" in name else "garment"
+        roles.setdefault(role, m)
+    if "garment" not in roles:
+        roles["garment"] = meshes[0]
+    extras = doc.get("extras") or {}
+    y_up = str(extras.get("up", "Y")).upper() != "Z"
+    out: dict[str, Any] = {}
+    for role, m in roles.items():
+        frames, faces = _gltf_mesh_frames(doc, blob, m)
+        out[role] = (_z_up(frames) if y_up else frames, faces)
+    frames, faces = out["garment"]
+    body = out.get("body")
+    prior = out.get("prior")
+    return ViewData(frames, faces, body_frames=None if body is None else body[0],
+                    body_faces=None if body is None else body[1], prior_frames=None if prior is None else prior[0],
+                    fps=float(extras.get("fps", 30.0)), name=p.name)
+
+
+def load_npz(path: str | Path) -> ViewData:
+    p = Path(path)
+    with np.load(p, allow_pickle=False) as z:
+        missing = [k for k in ("frames", "faces") if k not in z.files]
+        if missing:
+            raise ValueError(f"{p}: needs arrays 'frames' (T, N, 3) and 'faces' (F, 3); missing {missing} "
+                             f"(has {sorted(z.files)})")
+        get = {k: z[k] for k in z.files}
+    return ViewData(get["frames"], get["faces"], body_frames=get.get("body_frames"), body_faces=get.get("body_faces"),
+                    prior_frames=get.get("prior_frames"), fps=float(get.get("fps", 30.0)), name=p.name)
+
+
+_FRAME_NUMBER = re.compile(r"[_\-.]?\d+$")
+
+
+def load_obj_folder(path: str | Path) -> ViewData:
+    """A folder of OBJs, one sequence sorted by name; names with ``body`` / ``prior`` are the body / the prior."""
+    from garsim.geometry.io import load_mesh
+
+    p = Path(path)
+    files = sorted(q for q in p.iterdir() if q.suffix.lower() == ".obj")
+    if not files:
+        raise ValueError(f"{p}: no .obj files in the folder")
+    groups: dict[str, list[Path]] = {}
+    for q in files:
+        groups.setdefault(_FRAME_NUMBER.sub("", q.stem), []).append(q)
+    roles: dict[str, list[tuple[str, list[Path]]]] = {"garment": [], "body": [], "prior": []}
+    for stem, qs in groups.items():
+        low = stem.lower()
+        roles["body" if "body" in low else "prior" if "prior" in low else "garment"].append((stem, qs))
+    for role, entries in roles.items():
+        if len(entries) > 1:
+            names = ", ".join(stem for stem, _ in entries)
+            raise ValueError(f"{p}: the folder holds several {role} meshes ({names}), not one sequence; "
+                             "view one file, or put one sequence per folder")
+    if not roles["garment"]:
+        raise ValueError(f"{p}: no garment OBJs (only body/prior files)")
+
+    def read(entries: list[tuple[str, list[Path]]]) -> tuple[np.ndarray, np.ndarray] | None:
+        if not entries:
+            return None
+        stem, paths = entries[0]
+        meshes = [load_mesh(q) for q in paths]
+        sizes = {len(v) for v, _ in meshes}
+        if len(sizes) > 1:
+            raise ValueError(f"{p}: the '{stem}' OBJs differ in vertex count {sorted(sizes)}; a sequence "
+                             "shares one mesh")
+        return np.stack([v for v, _ in meshes]), meshes[0][1]
+
+    garment = read(roles["garment"])
+    assert garment is not None
+    frames, faces = garment
+    body, prior = read(roles["body"]), read(roles["prior"])
+    if body is not None and len(body[0]) == 1:
+        body = (np.repeat(body[0], len(frames), axis=0), body[1])
+    if body is not None and len(body[0]) != len(frames):
+        raise ValueError(f"{p}: {len(frames)} garment OBJs but {len(body[0])} body OBJs")
+    return ViewData(frames, faces, body_frames=None if body is None else body[0],
+                    body_faces=None if body is None else body[1], prior_frames=None if prior is None else prior[0],
+                    name=p.name)
+
+
+def load_view_data(path: str | Path) -> ViewData:
+    """Read any input of ``garsim view`` (see the module doc)."""
+    p = Path(path)
+    if not p.exists():
+        raise FileNotFoundError(f"{p}: no such file or folder")
+    if p.is_dir():
+        return load_obj_folder(p)
+    ext = p.suffix.lower()
+    if ext in (".glb", ".gltf"):
+        return load_gltf(p)
+    if ext == ".npz":
+        return load_npz(p)
+    if ext == ".pc2":
+        from garsim.export import read_pc2
+        from garsim.geometry.io import load_mesh
+
+        frames, _, _ = read_pc2(p)
+        obj = p.with_suffix(".obj")
+        if not obj.exists():
+            raise FileNotFoundError(f"{p}: the PC2 needs its mesh beside it ({obj.name})")
+        faces = load_mesh(obj)[1]
+        body_pc2 = p.with_name(f"{p.stem}_body.pc2")
+        body = None
+        if body_pc2.exists() and body_pc2.with_suffix(".obj").exists():
+            body = (read_pc2(body_pc2)[0], load_mesh(body_pc2.with_suffix(".obj"))[1])
+        return ViewData(frames, faces, body_frames=None if body is None else body[0],
+                        body_faces=None if body is None else body[1], name=p.name)
+    from garsim.geometry.io import load_mesh
+
+    v, f = load_mesh(p)
+    return ViewData(v[None], f, name=p.name)
+
+
+# ----------------------------------------------------------------------------- the viewer
+
+
+def vertex_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    v = vertices.astype(np.float64)
+    fn = np.cross(v[faces[:, 1]] - v[faces[:, 0]], v[faces[:, 2]] - v[faces[:, 0]])
+    n = np.zeros_like(v)
+    for k in range(3):
+        np.add.at(n, faces[:, k], fn)
+    length = np.linalg.norm(n, axis=1, keepdims=True)
+    return (n / np.where(length > 0, length, 1.0)).astype(np.float32)
+
+
+def colored_glb(vertices: np.ndarray, faces: np.ndarray, rgb: np.ndarray) -> bytes:
+    """A one-mesh GLB with per-vertex colours (float RGB in [0, 1]), smooth normals, double-sided."""
+    from garsim.export.gltf import _ARRAY_BUFFER, _ELEMENT_ARRAY_BUFFER, _Builder, _glb
+
+    b = _Builder()
+    attributes = {
+        "POSITION": b.add(vertices.astype(np.float32), "VEC3", _ARRAY_BUFFER, bounds=True),
+        "NORMAL": b.add(vertex_normals(vertices, faces), "VEC3", _ARRAY_BUFFER),
+        "COLOR_0": b.add(np.clip(rgb, 0.0, 1.0).astype(np.float32), "VEC3", _ARRAY_BUFFER),
+    }
+    indices = b.add(faces.astype(np.uint32).ravel(), "SCALAR", _ELEMENT_ARRAY_BUFFER)
+    doc = {
+        "asset": {"version": "2.0", "generator": "garsim.view"},
+        "scene": 0,
+        "scenes": [{"nodes": [0]}],
+        "nodes": [{"name": "garment", "mesh": 0}],
+        "meshes": [{"name": "garment", "primitives": [{"attributes": attributes, "indices": indices, "mode": 4,
+                                                        "material": 0}]}],
+        "materials": [{"name": "garment", "doubleSided": True,
+                       "pbrMetallicRoughness": {"baseColorFactor": [1.0, 1.0, 1.0, 1.0], "metallicFactor": 0.0,
+                                                "roughnessFactor": 0.85}}],
+        "accessors": b.accessors,
+        "bufferViews": b.buffer_views,
+        "buffers": [{"byteLength": b.offset}],
+    }
+    return _glb(doc, b.blob())
+
+
+class Viewer:
+    """The viser scene and GUI for one :class:`ViewData`; ``show(k)`` displays frame k."""
+
+    def __init__(self, data: ViewData, server: Any) -> None:
+        self.data = data
+        self.server = server
+        self.frame = 0
+        self._lock = threading.RLock()
+        self._stop = threading.Event()
+        corr = data.correction()
+        self.correction = corr
+        # colour scale: 0 .. the 99th percentile of the correction over the whole sequence (at least 1 mm)
+        self.vmax = max(float(np.percentile(corr, 99)), 1e-3) if corr is not None else 1.0
+
+        scene, gui = server.scene, server.gui
+        scene.set_up_direction("+z")
+        lo, hi = data.frames[0].min(axis=0), data.frames[0].max(axis=0)
+        if data.body_frames is not None:
+            lo = np.minimum(lo, data.body_frames[0].min(axis=0))
+            hi = np.maximum(hi, data.body_frames[0].max(axis=0))
+        center = 0.5 * (lo + hi)
+        dist = 1.6 * float(max(hi - lo)) + 0.5
+        server.initial_camera.look_at = tuple(float(x) for x in center)
+        server.initial_camera.position = (float(center[0]) + 0.35 * dist, float(center[1]) - dist, float(center[2]))
+        scene.add_grid("/ground", width=4.0, height=4.0, position=(float(center[0]), float(center[1]), float(lo[2])))
+
+        t = data.num_frames
+        gui.add_markdown(f"**{data.name or 'garsim'}**: {t} frame{'s' * (t != 1)}, "
+                         f"{data.frames.shape[1]} garment vertices")
+        self.slider = gui.add_slider("frame", min=0, max=max(t - 1, 1), step=1, initial_value=0, disabled=t < 2)
+        self.play = gui.add_checkbox("play", initial_value=False, disabled=t < 2)
+        self.fps = gui.add_number("fps", initial_value=float(round(data.fps, 3)), min=1.0, max=120.0, step=1.0)
+        self.show_garment = gui.add_checkbox("garment", initial_value=True)
+        self.show_body = gui.add_checkbox("body", initial_value=True) if data.body_frames is not None else None
+        self.show_prior = self.color_by_correction = None
+        self.legend = None
+        if corr is not None:
+            self.show_prior = gui.add_checkbox("show prior (not prediction)", initial_value=False)
+            self.color_by_correction = gui.add_checkbox("colour: |prediction - prior|", initial_value=True)
+            self.legend = gui.add_markdown("")
+
+        self.body = None
+        if data.body_frames is not None:
+            self.body = scene.add_mesh_simple("/body", data.body_frames[0], data.body_faces, color=BODY_RGB,
+                                              side="double")
+        self.garment: Any = None
+        self._render_garment()
+
+        self.slider.on_update(lambda _: self.show(int(self.slider.value)))
+        for handle in (self.show_garment, self.show_body, self.show_prior, self.color_by_correction):
+            if handle is not None:
+                handle.on_update(lambda _: self.show(self.frame))
+        self._player = threading.Thread(target=self._play_loop, name="garsim-view-play", daemon=True)
+        self._player.start()
+
+    # -- drawing
+    def garment_vertices(self, k: int) -> np.ndarray:
+        use_prior = self.show_prior is not None and bool(self.show_prior.value)
+        return (self.data.prior_frames if use_prior else self.data.frames)[k]  # type: ignore[index]
+
+    def garment_colors(self, k: int) -> np.ndarray:
+        n = self.data.frames.shape[1]
+        if self.correction is None or self.color_by_correction is None or not self.color_by_correction.value:
+            return np.tile(np.asarray(GARMENT_RGB, dtype=np.float32), (n, 1))
+        from matplotlib import colormaps
+
+        return colormaps["viridis"](np.clip(self.correction[k] / self.vmax, 0.0, 1.0))[:, :3].astype(np.float32)
+
+    def _render_garment(self) -> None:
+        k = self.frame
+        glb = colored_glb(self.garment_vertices(k), self.data.faces, self.garment_colors(k))
+        self.garment = self.server.scene.add_glb("/garment", glb, visible=bool(self.show_garment.value))
+        if self.legend is not None and self.correction is not None:
+            c = self.correction[k]
+            self.legend.content = (f"correction at frame {k}: mean {1000 * c.mean():.1f} mm, max "
+                                   f"{1000 * c.max():.1f} mm; colour scale 0 (dark) .. {1000 * self.vmax:.1f} mm "
+                                   "(yellow)")
+
+    def show(self, k: int) -> None:
+        """Display frame ``k`` (clamped) with the current toggles."""
+        with self._lock:
+            self.frame = int(np.clip(k, 0, self.data.num_frames - 1))
+            self._render_garment()
+            if self.body is not None and self.show_body is not None:
+                self.body.vertices = self.data.body_frames[self.frame]  # type: ignore[index]
+                self.body.visible = bool(self.show_body.value)
+
+    def _play_loop(self) -> None:
+        while not self._stop.is_set():
+            if self.play.value and self.data.num_frames > 1:
+                t0 = time.perf_counter()
+                self.slider.value = (int(self.slider.value) + 1) % self.data.num_frames
+                fps = float(self.fps.value) if self.fps.value else 30.0
+                self._stop.wait(max(1.0 / max(fps, 1.0) - (time.perf_counter() - t0), 0.0))
+            else:
+                self._stop.wait(0.05)
+
+    # -- lifetime
+    @property
+    def port(self) -> int:
+        return int(self.server.get_port())
+
+    @property
+    def url(self) -> str:
+        host = self.server.get_host()
+        return f"http://{'127.0.0.1' if host in ('0.0.0.0', '') else host}:{self.port}"
+
+    def stop(self) -> None:
+        self._stop.set()
+        self._player.join(timeout=2.0)
+        self.server.stop()
+
+
+def _import_viser() -> Any:
+    try:
+        import viser
+    except ImportError:
+        raise ViewerUnavailable(VIEWER_NEEDS) from None
+    return viser
+
+
+def serve(path: str | Path, host: str = "127.0.0.1", port: int = 8080, block: bool = True) -> Viewer:
+    """Serve ``path`` in the browser at http://host:port (the next free port if taken) -> the :class:`Viewer`.
+
+    ``block=True`` runs until Ctrl-C, then stops the server; ``block=False`` returns at once (call
+    ``viewer.stop()``; ``viewer.server`` is the ``viser.ViserServer``).
+    """
+    data = load_view_data(path)  # bad input fails before a server starts
+    viser = _import_viser()
+    server = viser.ViserServer(host=host, port=port, verbose=False)
+    try:
+        viewer = Viewer(data, server)
+    except BaseException:
+        server.stop()
+        raise
+    if block:
+        print(f"garsim view: {data.name} ({data.num_frames} frames) at {viewer.url}  (Ctrl-C to stop)", flush=True)
+        try:
+            while True:
+                time.sleep(1.0)
+        except KeyboardInterrupt:
+            pass
+        finally:
+            viewer.stop()
+    return viewer
