@@ -48,8 +48,10 @@ DEFAULT_STRETCH = 1.10
 """Default edge-length limit (x rest length) for preset-like fabrics (membrane stiffness >= 3e3 N/m)."""
 MAX_DEFAULT_STRETCH = 1.15
 """The derived default never exceeds this (a very soft custom fabric gets up to it)."""
-SEARCH_RADIUS = 0.012
-"""m: obstacle triangles are split until each piece fits in a ball of this radius around its centroid."""
+FINE_RADIUS = 0.012
+"""m: for the exact search, obstacle triangles are split until each piece fits in a ball of this radius."""
+COARSE_RADIUS = 0.012
+"""m: the (coarser or same) split used for distance bounds and inside tests away from the surface."""
 BAND = 0.004
 """m: vertices within ``margin`` + this of the obstacle get exact contact half-spaces for the sweeps."""
 MAX_ROUNDS = 12
@@ -66,39 +68,17 @@ _DIST_TOL = 1e-6  # m
 # obstacle: split triangles, KD-tree, pseudo-normals (cached by content)
 
 
-class _Obstacle:
-    """Triangle pieces of a mesh for exact closest-point queries, with the pseudo-normals of their features."""
+class _Pieces:
+    """A mesh's triangles split (1-to-4) until each piece fits in a ball of ``radius`` around its centroid,
+    a KD-tree over the centroids, and the pseudo-normal of every piece feature (corner, edge, interior)."""
 
-    def __init__(self, vertices: np.ndarray, faces: np.ndarray, radius: float = SEARCH_RADIUS) -> None:
-        v = np.asarray(vertices, dtype=np.float64)
-        f = np.asarray(faces, dtype=np.int64)
-        tri = v[f]  # (F, 3, 3)
-        fn_raw = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
-        fn = fn_raw / np.maximum(np.linalg.norm(fn_raw, axis=1, keepdims=True), 1e-30)
-        # angle-weighted vertex pseudo-normals
-        ang = np.empty((len(f), 3))
-        for c in range(3):
-            e1 = tri[:, (c + 1) % 3] - tri[:, c]
-            e2 = tri[:, (c + 2) % 3] - tri[:, c]
-            cosang = (e1 * e2).sum(1) / np.maximum(np.linalg.norm(e1, axis=1) * np.linalg.norm(e2, axis=1), 1e-30)
-            ang[:, c] = np.arccos(np.clip(cosang, -1.0, 1.0))
-        corners = f.ravel()
-        wn = (ang[:, :, None] * fn[:, None, :]).reshape(-1, 3)
-        vn = np.stack([np.bincount(corners, weights=wn[:, k], minlength=len(v)) for k in range(3)], axis=1)
-        # edge pseudo-normals: sum of the unit normals of the faces sharing the edge; edge c is opposite corner c
-        a = np.stack([f[:, 1], f[:, 2], f[:, 0]], axis=1).ravel()
-        b = np.stack([f[:, 2], f[:, 0], f[:, 1]], axis=1).ravel()
-        key = np.minimum(a, b) * len(v) + np.maximum(a, b)
-        _, inv = np.unique(key, return_inverse=True)
-        fn3 = np.repeat(fn, 3, axis=0)
-        en = np.stack([np.bincount(inv, weights=fn3[:, k]) for k in range(3)], axis=1)
-        face_edge_n = en[inv].reshape(len(f), 3, 3)
-
-        # split into pieces: corner barycentrics (in the parent) of each piece
-        parent = np.arange(len(f))
-        bary = np.broadcast_to(np.eye(3), (len(f), 3, 3)).copy()  # (P, corner, parent-vertex weight)
+    def __init__(self, tri: np.ndarray, vn_corner: np.ndarray, face_n: np.ndarray, face_edge_n: np.ndarray,
+                 radius: float) -> None:
+        nf = len(tri)
+        parent = np.arange(nf)
+        bary = np.broadcast_to(np.eye(3), (nf, 3, 3)).copy()  # (P, piece corner, weight of parent vertex)
         done_parent, done_bary = [], []
-        for _ in range(12):
+        for _ in range(16):
             pts = np.einsum("pcw,pwd->pcd", bary, tri[parent])
             r = np.linalg.norm(pts - pts.mean(1, keepdims=True), axis=2).max(1)
             big = r > radius
@@ -108,21 +88,23 @@ class _Obstacle:
                 break
             parent, b0 = parent[big], bary[big]
             m01, m12, m20 = 0.5 * (b0[:, 0] + b0[:, 1]), 0.5 * (b0[:, 1] + b0[:, 2]), 0.5 * (b0[:, 2] + b0[:, 0])
-            kids = [
-                np.stack([b0[:, 0], m01, m20], 1),
-                np.stack([m01, b0[:, 1], m12], 1),
-                np.stack([m20, m12, b0[:, 2]], 1),
-                np.stack([m01, m12, m20], 1),
-            ]
-            bary = np.concatenate(kids, 0)
+            bary = np.concatenate(
+                [
+                    np.stack([b0[:, 0], m01, m20], 1),
+                    np.stack([m01, b0[:, 1], m12], 1),
+                    np.stack([m20, m12, b0[:, 2]], 1),
+                    np.stack([m01, m12, m20], 1),
+                ],
+                0,
+            )
             parent = np.tile(parent, 4)
-        else:  # pragma: no cover - 12 levels split a 4 km triangle below 1 mm
+        else:  # pragma: no cover - 16 halvings shrink any body triangle far below the radius
             done_parent.append(parent)
             done_bary.append(bary)
         parent = np.concatenate(done_parent)
         bary = np.concatenate(done_bary)
         pts = np.einsum("pcw,pwd->pcd", bary, tri[parent])  # (P, 3, 3)
-        self.num_pieces = len(parent)
+        self.num = len(parent)
         self.a = np.ascontiguousarray(pts[:, 0])
         self.ab = np.ascontiguousarray(pts[:, 1] - pts[:, 0])
         self.ac = np.ascontiguousarray(pts[:, 2] - pts[:, 0])
@@ -130,38 +112,30 @@ class _Obstacle:
         self.cc = (self.ac * self.ac).sum(1)
         self.bc = (self.ab * self.ac).sum(1)
         cen = pts.mean(1)
-        self.radius = float(np.linalg.norm(pts - cen[:, None], axis=2).max()) if len(pts) else 0.0
+        self.radius = float(np.linalg.norm(pts - cen[:, None], axis=2).max())
         self.tree = cKDTree(cen)
-        self.vpos = v
-        self.vnormal = vn / np.maximum(np.linalg.norm(vn, axis=1, keepdims=True), 1e-30)
-        self.vtree = cKDTree(v)
-
-        # pseudo-normal of each piece feature: corner c, edge opposite corner c, interior
-        nz = bary > 0  # (P, corner, parent vertex): exact zeros survive halving
+        # pseudo-normals: a piece corner or edge inherits the parent feature it lies on (exact zeros
+        # survive halving), else the parent face normal
+        nz = bary > 0
         ncount = nz.sum(2)
-        corner_n = np.empty((len(parent), 3, 3))
-        edge_n = np.empty((len(parent), 3, 3))
-        face_n = fn[parent]
+        self.face_n = face_n[parent]
+        self.corner_n = np.repeat(self.face_n[:, None], 3, axis=1)
+        self.edge_n = self.corner_n.copy()
         for c in range(3):
             on_vertex = ncount[:, c] == 1
             on_edge = ncount[:, c] == 2
-            pv = np.argmax(bary[:, c], axis=1)  # the parent vertex it sits on
-            pe = np.argmin(bary[:, c], axis=1)  # the parent edge (opposite the zero weight)
-            corner_n[:, c] = face_n
-            corner_n[on_vertex, c] = vn[f[parent[on_vertex], pv[on_vertex]]]
-            corner_n[on_edge, c] = face_edge_n[parent[on_edge], pe[on_edge]]
-            # piece edge opposite corner c joins corners c+1, c+2: on a parent edge if both share a zero weight
-            shared_zero = ~nz[:, (c + 1) % 3] & ~nz[:, (c + 2) % 3]  # (P, parent vertex)
+            pv = np.argmax(bary[:, c], axis=1)
+            pe = np.argmin(bary[:, c], axis=1)
+            self.corner_n[on_vertex, c] = vn_corner[parent[on_vertex], pv[on_vertex]]
+            self.corner_n[on_edge, c] = face_edge_n[parent[on_edge], pe[on_edge]]
+            shared_zero = ~nz[:, (c + 1) % 3] & ~nz[:, (c + 2) % 3]  # piece edge opposite c on a parent edge
             on_parent_edge = shared_zero.any(1)
             zi = np.argmax(shared_zero, axis=1)
-            edge_n[:, c] = face_n
-            edge_n[on_parent_edge, c] = face_edge_n[parent[on_parent_edge], zi[on_parent_edge]]
-        self.corner_n = corner_n
-        self.edge_n = edge_n
-        self.face_n = face_n
+            self.edge_n[on_parent_edge, c] = face_edge_n[parent[on_parent_edge], zi[on_parent_edge]]
 
-    def _closest(self, p: np.ndarray, cand: np.ndarray) -> tuple[np.ndarray, ...]:
-        """Exact closest point of each p (M, 3) over candidate pieces (M, k): (dist, piece, v, w, closest)."""
+    def closest(self, p: np.ndarray, cand: np.ndarray) -> tuple[np.ndarray, ...]:
+        """Exact closest point of each p (M, 3) over candidate pieces (M, k) (Ericson 5.1.5, vectorised):
+        (distance, piece, v, w, closest point) with v, w the barycentrics of the piece's 2nd and 3rd corner."""
         a, ab, ac = self.a[cand], self.ab[cand], self.ac[cand]
         ap = p[:, None, :] - a
         d1 = np.einsum("mkd,mkd->mk", ab, ap)
@@ -172,13 +146,12 @@ class _Obstacle:
         va = d3 * d6 - d5 * d4
         vb = d5 * d2 - d1 * d6
         vc = d1 * d4 - d3 * d2
-        with np.errstate(divide="ignore", invalid="ignore"):
-            den = va + vb + vc
-            den = np.where(den > 1e-300, den, 1.0)
-            t_ab = d1 / np.where(d1 - d3 > 1e-300, d1 - d3, 1.0)
-            t_ac = d2 / np.where(d2 - d6 > 1e-300, d2 - d6, 1.0)
-            s_bc = (d4 - d3) + (d5 - d6)
-            t_bc = (d4 - d3) / np.where(s_bc > 1e-300, s_bc, 1.0)
+        den = va + vb + vc
+        den = np.where(den > 1e-300, den, 1.0)
+        t_ab = d1 / np.where(d1 - d3 > 1e-300, d1 - d3, 1.0)
+        t_ac = d2 / np.where(d2 - d6 > 1e-300, d2 - d6, 1.0)
+        s_bc = (d4 - d3) + (d5 - d6)
+        t_bc = (d4 - d3) / np.where(s_bc > 1e-300, s_bc, 1.0)
         conds = [
             (d1 <= 0) & (d2 <= 0),
             (d3 >= 0) & (d4 <= d3),
@@ -187,102 +160,55 @@ class _Obstacle:
             (vb <= 0) & (d2 >= 0) & (d6 <= 0),
             (va <= 0) & ((d4 - d3) >= 0) & ((d5 - d6) >= 0),
         ]
-        zero, one = 0.0, 1.0
-        v = np.select(conds, [zero, one, zero, t_ab, zero, 1.0 - t_bc], vb / den)
-        w = np.select(conds, [zero, zero, one, zero, t_ac, t_bc], vc / den)
-        v = np.clip(v, 0.0, 1.0)
-        w = np.clip(w, 0.0, 1.0)
+        v = np.clip(np.select(conds, [0.0, 1.0, 0.0, t_ab, 0.0, 1.0 - t_bc], vb / den), 0.0, 1.0)
+        w = np.clip(np.select(conds, [0.0, 0.0, 1.0, 0.0, t_ac, t_bc], vc / den), 0.0, 1.0)
         q = a + v[..., None] * ab + w[..., None] * ac
         d2q = ((p[:, None, :] - q) ** 2).sum(-1)
         best = np.argmin(d2q, axis=1)
         rows = np.arange(len(p))
-        return (np.sqrt(d2q[rows, best]), cand[rows, best], v[rows, best], w[rows, best], q[rows, best])
+        return np.sqrt(d2q[rows, best]), cand[rows, best], v[rows, best], w[rows, best], q[rows, best]
 
-    def query(
-        self, points: np.ndarray, band: float, far_outside: np.ndarray | None = None, reach: float = 0.0
-    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """Signed distance (negative inside), closest point, outward unit normal and an ``exact`` flag.
+    def feature_normal(self, piece: np.ndarray, v: np.ndarray, w: np.ndarray) -> np.ndarray:
+        """The (unnormalised) pseudo-normal of the feature holding each closest point."""
+        bw = np.stack([1.0 - v - w, v, w], 1)
+        cnt = (bw > 1e-12).sum(1)
+        out = self.face_n[piece].copy()
+        one = cnt == 1
+        if one.any():
+            out[one] = self.corner_n[piece[one], np.argmax(bw[one], axis=1)]
+        two = cnt == 2
+        if two.any():
+            out[two] = self.edge_n[piece[two], np.argmin(bw[two], axis=1)]
+        return out
 
-        Exact for every point within ``band`` of the surface and every point found inside. A point
-        with no piece centroid within ``band`` + piece radius is at least ``band`` away; it is
-        classified by its nearest obstacle vertex's pseudo-normal and, if that says inside, resolved
-        exactly; otherwise it is reported at distance ``band`` with ``exact`` False (closest point
-        and normal then undefined: zeros). ``far_outside`` (M,) bool marks points known not to be
-        deeper than ``band`` (their far case needs no sign test). With ``reach`` > ``band``, a far
-        point's reported distance is a lower bound up to ``reach`` (nearest piece centroid - radius)
-        and its sign test uses that piece.
-        """
-        p = np.asarray(points, dtype=np.float64)
-        m = len(p)
-        sdist = np.full(m, float(band))
-        close = np.zeros((m, 3))
-        normal = np.zeros((m, 3))
-        exact = np.zeros(m, dtype=bool)
-        if m == 0:
-            return sdist, close, normal, exact
-        # near points: every piece that can hold a surface point within band lies within ub
-        near, best, far = self._search(p, np.arange(m), float(band) + self.radius)
-        if far_outside is not None and len(far):
-            far = far[~np.asarray(far_outside, dtype=bool)[far]]
-        if len(far) and reach > band:
-            # a distance lower bound (nearest piece centroid within reach) and a sign from that piece
-            dc, pc1 = self.tree.query(p[far], k=1, distance_upper_bound=reach + self.radius)
-            got = np.isfinite(dc)
-            sdist[far] = np.maximum(band, np.where(got, dc, reach + self.radius) - self.radius)
-            looks_inside = np.zeros(len(far), dtype=bool)
-            if got.any():
-                fg = far[got]
-                pcg = pc1[got].astype(np.int64)[:, None]
-                _, pcg, vg, wg, qg = self._closest(p[fg], pcg)
-                looks_inside[got] = self._sign(p[fg], qg, pcg, vg, wg) < 0
-            rest = ~got
-        else:
-            looks_inside = np.zeros(len(far), dtype=bool)
-            rest = np.ones(len(far), dtype=bool)
-        if rest.any():
-            _, vi = self.vtree.query(p[far[rest]], k=1)
-            looks_inside[rest] = np.einsum("md,md->m", p[far[rest]] - self.vpos[vi], self.vnormal[vi]) < 0
-        deep = far[looks_inside]
-        if len(deep):
-            found, best2, _ = self._search(p, deep, np.inf)
-            near = np.concatenate([near, found])
-            best = tuple(np.concatenate([a, b]) for a, b in zip(best, best2))
-        if len(near):
-            _, pc, vv, ww, qq = best
-            sign = self._sign(p[near], qq, pc, vv, ww)
-            diff = p[near] - qq
-            nrm = np.linalg.norm(diff, axis=1)
-            feat_n = self._feature_normal(pc, vv, ww)
-            feat_n /= np.maximum(np.linalg.norm(feat_n, axis=1, keepdims=True), 1e-30)
-            use_diff = (nrm > 1e-12)[:, None]
-            normal[near] = np.where(use_diff, sign[:, None] * diff / np.maximum(nrm, 1e-30)[:, None], feat_n)
-            sdist[near] = sign * nrm
-            close[near] = qq
-            exact[near] = True
-        return sdist, close, normal, exact
+    def sign(self, p, close, piece, v, w) -> np.ndarray:
+        s = np.einsum("md,md->m", p - close, self.feature_normal(piece, v, w))
+        return np.where(s < 0, -1.0, 1.0)
 
-    def _search(self, p: np.ndarray, todo: np.ndarray, ub: float) -> tuple[np.ndarray, tuple, np.ndarray]:
+    def search(self, p: np.ndarray, todo: np.ndarray, ub: float) -> tuple[np.ndarray, tuple, np.ndarray]:
         """Exact closest pieces of the points ``p[todo]``, unless proven farther than ``ub - radius``.
 
-        Returns (resolved indices, their (dist, piece, v, w, closest), far indices).
+        The candidate set (nearest centroids) grows 4x until it provably holds the closest piece
+        (best distance <= k-th centroid distance - radius). Returns (resolved indices, their
+        (distance, piece, v, w, closest), far indices).
         """
         res_idx, res, far_idx = [], [], []
-        k = min(8, self.num_pieces)
+        k = min(8, self.num)
         while len(todo):
             dc, cand = self.tree.query(p[todo], k=k, distance_upper_bound=ub)
             dc = np.asarray(dc).reshape(len(todo), k)
             cand = np.asarray(cand, dtype=np.int64).reshape(len(todo), k)
-            has = np.isfinite(dc[:, 0])  # no piece centroid within ub: farther than ub - radius
+            has = np.isfinite(dc[:, 0])  # no centroid within ub: farther than ub - radius
             if (~has).any():
                 far_idx.append(todo[~has])
             todo, dc, cand = todo[has], dc[has], cand[has]
             if not len(todo):
                 break
             valid = np.isfinite(dc)
-            cand = np.where(valid, cand, cand[:, :1])  # pad with the first candidate
-            dd, pc, vv, ww, qq = self._closest(p[todo], cand)
-            full = valid[:, -1] & (k < self.num_pieces)
-            lb = np.where(full, dc[:, -1] - self.radius, np.inf)  # bound for every untested piece
+            cand = np.where(valid, cand, cand[:, :1])
+            dd, pc, vv, ww, qq = self.closest(p[todo], cand)
+            full = valid[:, -1] & (k < self.num)
+            lb = np.where(full, dc[:, -1] - self.radius, np.inf)  # every untested piece is at least this far
             proven = dd <= lb
             far = ~proven & (np.minimum(dd, lb) > ub - self.radius)
             res_idx.append(todo[proven])
@@ -290,7 +216,7 @@ class _Obstacle:
             if far.any():
                 far_idx.append(todo[far])
             todo = todo[~proven & ~far]
-            k = min(4 * k, self.num_pieces)
+            k = min(4 * k, self.num)
         if res_idx:
             best = tuple(np.concatenate([r[i] for r in res]) for i in range(5))
             idx = np.concatenate(res_idx)
@@ -300,26 +226,102 @@ class _Obstacle:
         far = np.concatenate(far_idx) if far_idx else np.zeros(0, dtype=np.int64)
         return idx, best, far
 
-    def _feature_normal(self, piece: np.ndarray, v: np.ndarray, w: np.ndarray) -> np.ndarray:
-        u = 1.0 - v - w
-        bw = np.stack([u, v, w], 1)
-        pos = bw > 1e-12
-        cnt = pos.sum(1)
-        rows = np.arange(len(piece))
-        out = self.face_n[piece].copy()
-        one = cnt == 1
-        if one.any():
-            out[one] = self.corner_n[piece[one], np.argmax(bw[one], axis=1)]
-        two = cnt == 2
-        if two.any():
-            out[two] = self.edge_n[piece[two], np.argmin(bw[two], axis=1)]
-        del rows
-        return out
 
-    def _sign(self, p, close, piece, v, w) -> np.ndarray:
-        n = self._feature_normal(piece, v, w)
-        s = np.einsum("md,md->m", p - close, n)
-        return np.where(s < 0, -1.0, 1.0)
+class _Obstacle:
+    """A triangle mesh prepared for signed closest-point queries: fine pieces for the exact search near the
+    surface, coarse pieces for distance bounds and the sign farther out, vertex pseudo-normals beyond."""
+
+    def __init__(self, vertices: np.ndarray, faces: np.ndarray) -> None:
+        v = np.asarray(vertices, dtype=np.float64)
+        f = np.asarray(faces, dtype=np.int64)
+        tri = v[f]
+        fn = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+        fn /= np.maximum(np.linalg.norm(fn, axis=1, keepdims=True), 1e-30)
+        ang = np.empty((len(f), 3))  # corner angles: angle-weighted vertex pseudo-normals
+        for c in range(3):
+            e1 = tri[:, (c + 1) % 3] - tri[:, c]
+            e2 = tri[:, (c + 2) % 3] - tri[:, c]
+            cosang = (e1 * e2).sum(1) / np.maximum(np.linalg.norm(e1, axis=1) * np.linalg.norm(e2, axis=1), 1e-30)
+            ang[:, c] = np.arccos(np.clip(cosang, -1.0, 1.0))
+        wn = (ang[:, :, None] * fn[:, None, :]).reshape(-1, 3)
+        vn = np.stack([np.bincount(f.ravel(), weights=wn[:, k], minlength=len(v)) for k in range(3)], axis=1)
+        # edge pseudo-normals (sum of the adjacent unit face normals); face edge c is opposite corner c
+        a = np.stack([f[:, 1], f[:, 2], f[:, 0]], axis=1).ravel()
+        b = np.stack([f[:, 2], f[:, 0], f[:, 1]], axis=1).ravel()
+        _, inv = np.unique(np.minimum(a, b) * len(v) + np.maximum(a, b), return_inverse=True)
+        fn3 = np.repeat(fn, 3, axis=0)
+        en = np.stack([np.bincount(inv, weights=fn3[:, k]) for k in range(3)], axis=1)
+        face_edge_n = en[inv].reshape(len(f), 3, 3)
+        vn_corner = vn[f]
+        self.fine = _Pieces(tri, vn_corner, fn, face_edge_n, FINE_RADIUS)
+        same = COARSE_RADIUS == FINE_RADIUS
+        self.coarse = self.fine if same else _Pieces(tri, vn_corner, fn, face_edge_n, COARSE_RADIUS)
+        self.vpos = v
+        self.vnormal = vn / np.maximum(np.linalg.norm(vn, axis=1, keepdims=True), 1e-30)
+        self.vtree = cKDTree(v)
+
+    def query(
+        self, points: np.ndarray, band: float, far_outside: np.ndarray | None = None, reach: float = 0.0
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """Signed distance (negative inside), closest point, outward unit normal and an ``exact`` flag.
+
+        Exact for every point within ``band`` of the surface and every point found inside. Any other
+        point is reported at a lower bound of its distance (>= ``band``; with ``reach`` > ``band`` the
+        bound from the nearest coarse piece within ``reach``), closest point and normal zero,
+        ``exact`` False. Its inside test uses the nearest coarse piece's pseudo-normal (the nearest
+        obstacle vertex's beyond ``reach``) and an exact search when that says inside.
+        ``far_outside`` (M,) bool marks points known not to be deeper than ``band`` (no test needed).
+        """
+        p = np.asarray(points, dtype=np.float64)
+        m = len(p)
+        band = float(band)
+        sdist = np.full(m, band)
+        close = np.zeros((m, 3))
+        normal = np.zeros((m, 3))
+        exact = np.zeros(m, dtype=bool)
+        if m == 0:
+            return sdist, close, normal, exact
+        fine, coarse = self.fine, self.coarse
+        near, best, far = fine.search(p, np.arange(m), band + fine.radius)
+        if len(far):
+            ub = max(reach, band) + coarse.radius
+            sel = np.ones(len(far), dtype=bool) if far_outside is None else ~np.asarray(far_outside, bool)[far]
+            if reach > band:  # a distance bound for every far point
+                dc, pc1 = coarse.tree.query(p[far], k=1, distance_upper_bound=ub)
+                sdist[far] = np.maximum(band, np.minimum(dc, ub) - coarse.radius)
+                test, dc, pc1 = far[sel], dc[sel], pc1[sel]
+            else:
+                test = far[sel]
+                dc, pc1 = coarse.tree.query(p[test], k=1, distance_upper_bound=ub)
+            got = np.isfinite(dc)
+            looks_inside = np.zeros(len(test), dtype=bool)
+            if got.any():
+                tg = test[got]
+                _, pcg, vg, wg, qg = coarse.closest(p[tg], pc1[got].astype(np.int64)[:, None])
+                looks_inside[got] = coarse.sign(p[tg], qg, pcg, vg, wg) < 0
+            if (~got).any():
+                tr = test[~got]
+                _, vi = self.vtree.query(p[tr], k=1)
+                looks_inside[~got] = np.einsum("md,md->m", p[tr] - self.vpos[vi], self.vnormal[vi]) < 0
+            deep = test[looks_inside]
+            if len(deep):
+                found, best2, _ = fine.search(p, deep, np.inf)
+                near = np.concatenate([near, found])
+                best = tuple(np.concatenate([a, b]) for a, b in zip(best, best2))
+        if len(near):
+            _, pc, vv, ww, qq = best
+            sign = fine.sign(p[near], qq, pc, vv, ww)
+            diff = p[near] - qq
+            nrm = np.linalg.norm(diff, axis=1)
+            feat_n = fine.feature_normal(pc, vv, ww)
+            feat_n /= np.maximum(np.linalg.norm(feat_n, axis=1, keepdims=True), 1e-30)
+            normal[near] = np.where(
+                (nrm > 1e-12)[:, None], sign[:, None] * diff / np.maximum(nrm, 1e-30)[:, None], feat_n
+            )
+            sdist[near] = sign * nrm
+            close[near] = qq
+            exact[near] = True
+        return sdist, close, normal, exact
 
 
 _OBSTACLES = ContentCache(4)
@@ -462,9 +464,16 @@ def refine(
     d, c, nrm, _ = obs.query(x, band, reach=reach(x))
     xq = x.copy()  # positions at the last query
 
+    # edge samples: results cached per (edge, t) and recomputed only where the sample moved
+    ne = len(e_mov)
+    s_pos = np.full((ne, len(ts), 3), np.nan)
+    s_d = np.zeros((ne, len(ts)))
+    s_c = np.zeros((ne, len(ts), 3))
+    s_n = np.zeros((ne, len(ts), 3))
+
     def sample_state(x, d):
         """Edge samples that may lie deeper than ``margin`` inside: (edge, t, dist, closest, normal) or None."""
-        if len(e_mov) == 0:
+        if ne == 0:
             return None
         i, j = e_mov[:, 0], e_mov[:, 1]
         length = np.linalg.norm(x[j] - x[i], axis=1)
@@ -476,10 +485,16 @@ def refine(
             return None
         t = ts[kt]
         s = (1 - t)[:, None] * x[i[ke]] + t[:, None] * x[j[ke]]
-        # a sample that cannot be deeper than BAND and has no surface within BAND is outside: skip its sign test
-        sd, sc, sn, _ = obs.query(s, BAND, far_outside=bound[ke, kt] > -BAND)
+        new = ~np.all(s == s_pos[ke, kt], axis=1)
+        if new.any():
+            kn, tn = ke[new], kt[new]
+            # a sample that cannot be deeper than BAND and has no surface within BAND is outside
+            sd, sc, sn, _ = obs.query(s[new], BAND, far_outside=bound[kn, tn] > -BAND)
+            s_pos[kn, tn], s_d[kn, tn], s_c[kn, tn], s_n[kn, tn] = s[new], sd, sc, sn
+        sd = s_d[ke, kt]
         keep = sd < -margin + 0.5 * BAND  # near the -margin limit: kept as half-spaces for the sweeps
-        return e_mov[ke[keep]], t[keep], sd[keep], sc[keep], sn[keep]
+        ke, kt = ke[keep], kt[keep]
+        return e_mov[ke], ts[kt], s_d[ke, kt], s_c[ke, kt], s_n[ke, kt]
 
     def violated(x, d, samples) -> bool:
         if len(e_s):

@@ -10,9 +10,9 @@ import pytest
 
 from garsim.data.sample import FABRICS as FABRIC_NAMES
 from garsim.garments.fabrics import (
-    FABRICS,
     GF_CM2_PER_CM,
     PRESET_NAMES,
+    PRESETS,
     Fabric,
     edge_bending_stiffness,
     fabric_from_values,
@@ -25,21 +25,21 @@ from garsim.garments.fabrics import (
 
 
 def test_table_matches_the_one_hot_order():
-    assert tuple(FABRICS) == FABRIC_NAMES == PRESET_NAMES
-    for name, fabric in FABRICS.items():
+    assert tuple(PRESETS) == FABRIC_NAMES == PRESET_NAMES
+    for name, fabric in PRESETS.items():
         assert fabric.name == name
 
 
 def test_presets_lie_in_published_ranges_and_are_ordered():
     # Kawabata bending rigidity in gf cm^2/cm: silk ~0.005-0.05, cotton 0.05-0.2, denim 0.5-3, leather 10-100
-    kes = {n: f.bending / GF_CM2_PER_CM for n, f in FABRICS.items()}
+    kes = {n: f.bending / GF_CM2_PER_CM for n, f in PRESETS.items()}
     assert 0.005 <= kes["silk"] <= 0.05 and 0.05 <= kes["cotton"] <= 0.2
     assert 0.5 <= kes["denim"] <= 3.0 and 10.0 <= kes["leather"] <= 100.0
-    ladder = [FABRICS[n] for n in PRESET_NAMES]
+    ladder = [PRESETS[n] for n in PRESET_NAMES]
     for a, b in zip(ladder, ladder[1:]):
         assert b.bending >= 3 * a.bending and b.density > a.density
     # Peirce's bending length: ~1 cm silk ... ~5+ cm leather
-    assert 0.005 < FABRICS["silk"].bending_length < 0.015 < FABRICS["leather"].bending_length
+    assert 0.005 < PRESETS["silk"].bending_length < 0.015 < PRESETS["leather"].bending_length
 
 
 def test_hinge_stiffness_of_an_equilateral_pair_by_hand():
@@ -60,10 +60,10 @@ def test_hinge_stiffness_of_an_equilateral_pair_by_hand():
 
 def test_interpolation_between_presets_is_monotone_and_exact_at_the_ends():
     a = interpolate_fabric("silk", "leather", 0.0)
-    assert a.values() == pytest.approx(FABRICS["silk"].values())
-    assert interpolate_fabric("silk", "leather", 1.0).bending == pytest.approx(FABRICS["leather"].bending)
+    assert a.values() == pytest.approx(PRESETS["silk"].values())
+    assert interpolate_fabric("silk", "leather", 1.0).bending == pytest.approx(PRESETS["leather"].bending)
     mids = [interpolate_fabric("cotton", "denim", t) for t in (0.25, 0.5, 0.75)]
-    assert FABRICS["cotton"].bending < mids[0].bending < mids[1].bending < mids[2].bending < FABRICS["denim"].bending
+    assert PRESETS["cotton"].bending < mids[0].bending < mids[1].bending < mids[2].bending < PRESETS["denim"].bending
     assert stiffness_coordinate("silk") == pytest.approx(0.0) and stiffness_coordinate("leather") == pytest.approx(1.0)
     assert nearest_preset(mids[0]) == "cotton" and nearest_preset(mids[2]) == "denim"
     with pytest.raises(ValueError, match="t must be in"):
@@ -80,9 +80,9 @@ def test_sampled_fabrics_stay_between_silk_and_leather_and_round_trip():
 
 
 def test_get_fabric_by_name_or_instance():
-    assert get_fabric("silk") is FABRICS["silk"]
-    assert get_fabric(" Denim ") is FABRICS["denim"]
-    custom = dataclasses.replace(FABRICS["cotton"], name="stiff-cotton", bending=1e-4)
+    assert get_fabric("silk") is PRESETS["silk"]
+    assert get_fabric(" Denim ") is PRESETS["denim"]
+    custom = dataclasses.replace(PRESETS["cotton"], name="stiff-cotton", bending=1e-4)
     assert get_fabric(custom) is custom
 
 
@@ -95,7 +95,7 @@ def test_unknown_fabric_lists_valid_names():
 
 def test_presets_are_frozen_and_validated():
     with pytest.raises(dataclasses.FrozenInstanceError):
-        FABRICS["silk"].density = 1.0  # type: ignore[misc]
+        PRESETS["silk"].density = 1.0  # type: ignore[misc]
     with pytest.raises(ValueError, match="density"):
         Fabric("bad", bending=1e-5, density=-0.1, stretch=1e3)
     with pytest.raises(ValueError, match="bending"):

@@ -41,7 +41,7 @@ def test_eq2_quantities_match_brute_force(sample):
     np.testing.assert_allclose(g.edge_attr.numpy()[:, 3:], P[r] - P[s], atol=1e-6)
     assert g.edge_index.shape[1] == 2 * (16 * 5 + 2 * 16 * 4)  # rings + verticals + diagonals, both ways
     # denim on the silk (0) .. leather (1) log scales of bending, density, stretch
-    from garsim.garments.fabrics import FABRICS as PRESETS
+    from garsim.garments.fabrics import PRESETS
 
     expect = [(np.log(getattr(PRESETS["denim"], k)) - np.log(getattr(PRESETS["silk"], k)))
               / (np.log(getattr(PRESETS["leather"], k)) - np.log(getattr(PRESETS["silk"], k)))

@@ -82,7 +82,7 @@ class Fabric:
         return (self.bending / (self.density * 9.81)) ** (1.0 / 3.0)
 
 
-FABRICS: dict[str, Fabric] = {
+PRESETS: dict[str, Fabric] = {
     "silk": Fabric("silk", bending=0.02 * GF_CM2_PER_CM, density=0.07, stretch=3.0e3, friction=0.3),
     "cotton": Fabric("cotton", bending=0.12 * GF_CM2_PER_CM, density=0.15, stretch=5.0e3, friction=0.5),
     "denim": Fabric("denim", bending=3.0 * GF_CM2_PER_CM, density=0.42, stretch=1.0e4, friction=0.6),
@@ -99,9 +99,9 @@ def get_fabric(fabric: str | Fabric) -> Fabric:
     """A preset by name (case-insensitive), or a given ``Fabric`` unchanged."""
     if isinstance(fabric, Fabric):
         return fabric
-    if isinstance(fabric, str) and fabric.strip().lower() in FABRICS:
-        return FABRICS[fabric.strip().lower()]
-    raise ValueError(f"unknown fabric {fabric!r}; choose one of {list(FABRICS)} or pass a Fabric")
+    if isinstance(fabric, str) and fabric.strip().lower() in PRESETS:
+        return PRESETS[fabric.strip().lower()]
+    raise ValueError(f"unknown fabric {fabric!r}; choose one of {list(PRESETS)} or pass a Fabric")
 
 
 def fabric_from_values(values: dict[str, float], name: str = "custom") -> Fabric:
@@ -128,14 +128,14 @@ def interpolate_fabric(a: str | Fabric, b: str | Fabric, t: float, name: str = "
 def stiffness_coordinate(fabric: str | Fabric) -> float:
     """Where a fabric's bending rigidity lies on the log scale from silk (0) to leather (1) (may be outside)."""
     b = get_fabric(fabric).bending
-    lo, hi = math.log(FABRICS["silk"].bending), math.log(FABRICS["leather"].bending)
+    lo, hi = math.log(PRESETS["silk"].bending), math.log(PRESETS["leather"].bending)
     return (math.log(b) - lo) / (hi - lo)
 
 
 def nearest_preset(fabric: str | Fabric) -> str:
     """The preset name closest to ``fabric`` in log bending rigidity."""
     b = math.log(get_fabric(fabric).bending)
-    return min(PRESET_NAMES, key=lambda n: abs(math.log(FABRICS[n].bending) - b))
+    return min(PRESET_NAMES, key=lambda n: abs(math.log(PRESETS[n].bending) - b))
 
 
 def sample_fabric(rng: np.random.Generator, name: str = "custom") -> Fabric:
@@ -143,8 +143,8 @@ def sample_fabric(rng: np.random.Generator, name: str = "custom") -> Fabric:
     t = float(rng.uniform(0.0, 1.0))
     base = interpolate_fabric("silk", "leather", t)
     jitter = np.exp(rng.normal(0.0, 0.25, size=2))
-    lo_d, hi_d = FABRICS["silk"].density, FABRICS["leather"].density
-    lo_s, hi_s = FABRICS["silk"].stretch, FABRICS["leather"].stretch
+    lo_d, hi_d = PRESETS["silk"].density, PRESETS["leather"].density
+    lo_s, hi_s = PRESETS["silk"].stretch, PRESETS["leather"].stretch
     density = float(np.clip(base.density * jitter[0], lo_d, hi_d))
     stretch = float(np.clip(base.stretch * jitter[1], lo_s, hi_s))
     values = base.values() | {"density": density, "stretch": stretch}

@@ -22,7 +22,7 @@ Z and to translations. Full SO(3) equivariance is not wanted: gravity points dow
 
 from __future__ import annotations
 
-from collections.abc import Iterable, Sequence
+from collections.abc import Sequence
 
 import numpy as np
 import scipy.sparse as sp
@@ -31,7 +31,7 @@ from scipy.spatial import cKDTree
 from torch_geometric.data import Batch, Data
 
 from garsim.data.sample import Sample
-from garsim.garments.fabrics import FABRICS as FABRIC_PRESETS
+from garsim.garments.fabrics import PRESETS as FABRIC_PRESETS
 from garsim.garments.fabrics import Fabric, fabric_from_values, get_fabric
 from garsim.geometry.cache import ContentCache, content_key
 from garsim.geometry.mesh import directed_edges, face_normals, face_pairs, vertex_rings

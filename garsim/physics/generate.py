@@ -180,7 +180,7 @@ def _pose_modes(family: str, rng: np.random.Generator, count: int) -> list[str]:
 
 def plan_jobs(config: GenerateConfig) -> list[JobSpec]:
     """All jobs of the dataset, deterministic in the seed (independent of shard and workers)."""
-    from garsim.garments.fabrics import FABRICS, PRESET_NAMES, sample_fabric
+    from garsim.garments.fabrics import PRESET_NAMES, PRESETS, sample_fabric
     from garsim.garments.implicit import sample_implicit_params
     from garsim.garments.templates import sample_garment_params
 
@@ -203,13 +203,13 @@ def plan_jobs(config: GenerateConfig) -> list[JobSpec]:
             lo = min(config.min_vertices, hi)
             vertices = int(round(math.exp(rng.uniform(math.log(lo), math.log(hi)))))
             if paired:
-                fabrics = [{"name": n, **FABRICS[n].values()} for n in PRESET_NAMES]
+                fabrics = [{"name": n, **PRESETS[n].values()} for n in PRESET_NAMES]
             elif rng.uniform() < config.physical_share:
                 fab = sample_fabric(rng)
                 fabrics = [{"name": "custom", **fab.values()}]
             else:
                 name = PRESET_NAMES[int(rng.integers(len(PRESET_NAMES)))]
-                fabrics = [{"name": name, **FABRICS[name].values()}]
+                fabrics = [{"name": name, **PRESETS[name].values()}]
             phenotype = {k: round(float(rng.uniform(a, b)), 4) for k, (a, b) in PHENOTYPE_RANGES.items()}
             jobs.append(JobSpec(
                 job_id=f"{split}-{i:05d}", index=i, split=split, family=family, construction=construction,

@@ -19,6 +19,8 @@ from scipy.spatial import cKDTree
 from torch_geometric.data import Data
 from torch_geometric.utils import scatter
 
+from garsim.model.garsim import node_batch
+
 
 @dataclass
 class LossWeights:
@@ -33,10 +35,9 @@ class LossWeights:
 
 
 def _graph_ids(data: Data) -> tuple[torch.Tensor, int]:
-    b = getattr(data, "batch", None)
-    if b is None:
-        return torch.zeros(data.num_nodes, dtype=torch.long, device=data.pos.device), 1
-    return b, int(data.num_graphs)
+    """(graph id of every node, number of graphs) of a graph or a batch."""
+    b = node_batch(data)
+    return b, int(data.num_graphs) if getattr(data, "batch", None) is not None else 1
 
 
 def l2_loss(pred: torch.Tensor, target: torch.Tensor, pinned: torch.Tensor, batch: torch.Tensor, num_graphs: int, beta: float = 0.4) -> torch.Tensor:
@@ -139,7 +140,7 @@ def garsim_loss(
     return total.mean(), terms
 
 
-def euclidean_error_mm(pred: torch.Tensor, target: torch.Tensor, data: Data) -> torch.Tensor:
+def per_graph_error_mm(pred: torch.Tensor, target: torch.Tensor, data: Data) -> torch.Tensor:
     """Per-graph mean Euclidean vertex error in millimetres, (B,)."""
     batch, num_graphs = _graph_ids(data)
     err = torch.linalg.vector_norm(pred - target, dim=-1) * 1000.0

@@ -27,12 +27,12 @@ from safetensors.torch import load_file, save_file
 from torch.utils.data import DataLoader, Dataset
 from torch.utils.data.distributed import DistributedSampler
 
+from garsim.atomic import atomic_write
 from garsim.data.sample import Sample
 from garsim.model.config import GarSimConfig, check_known_keys
-from garsim.atomic import atomic_write
 from garsim.model.garsim import GarSimModel
 from garsim.model.inputs import GarmentGraph, build_graph, collate
-from garsim.train.losses import LossWeights, collision_fraction, euclidean_error_mm, garsim_loss
+from garsim.train.losses import LossWeights, collision_fraction, garsim_loss, per_graph_error_mm
 
 CSV_FIELDS = ("epoch", "step", "lr", "train_loss", "train_l2_mm", "val_err_mm", "val_prior_mm", "val_collision_pct",
               "val_score", "collision", "seconds")
@@ -73,7 +73,7 @@ class TrainConfig:
         return asdict(self)
 
     @classmethod
-    def from_dict(cls, d: dict[str, Any]) -> "TrainConfig":
+    def from_dict(cls, d: dict[str, Any]) -> TrainConfig:
         """Inverse of ``to_dict``; unknown keys are an error."""
         check_known_keys(cls, d)
         d = dict(d)
@@ -266,8 +266,8 @@ class Trainer:
             for start in range(0, len(idx), self.cfg.batch_size):
                 batch = collate([self.val_set[i] for i in idx[start : start + self.cfg.batch_size]])
                 pred = self.model(batch)
-                sums[0] += euclidean_error_mm(pred, batch.target, batch).sum().item()
-                sums[1] += euclidean_error_mm(batch.prior, batch.target, batch).sum().item()
+                sums[0] += per_graph_error_mm(pred, batch.target, batch).sum().item()
+                sums[1] += per_graph_error_mm(batch.prior, batch.target, batch).sum().item()
                 sums[2] += 100.0 * collision_fraction(pred, batch).sum().item()
                 sums[3] += batch.num_graphs
         if self.world > 1:

@@ -1,0 +1,141 @@
+"""garsim view: the readers (NPZ, GLB, OBJ folder) and the viser server, started non-blocking on a free port."""
+
+from __future__ import annotations
+
+import socket
+import subprocess
+import sys
+import urllib.request
+
+import numpy as np
+import pytest
+
+from garsim.view import VIEWER_NEEDS, ViewerUnavailable, load_view_data
+
+T = 3
+
+
+@pytest.fixture(scope="module")
+def scene():
+    """A tiny garment sequence (icosphere, moving), its prior, and a body (box) moving along."""
+    import trimesh
+
+    g = trimesh.creation.icosphere(subdivisions=1, radius=0.2)
+    b = trimesh.creation.box(extents=(0.3, 0.2, 0.6))
+    gv, bv = np.asarray(g.vertices, np.float32), np.asarray(b.vertices, np.float32)
+    frames = np.stack([gv + np.float32([0.0, 0.0, 1.0 + 0.05 * t]) for t in range(T)])
+    body = np.stack([bv + np.float32([0.0, 0.0, 0.9 + 0.05 * t]) for t in range(T)])
+    prior = frames.copy()
+    prior[:, :, 0] += np.linspace(0.0, 0.02, len(gv), dtype=np.float32)  # a correction of 0..20 mm
+    return {"frames": frames, "faces": np.asarray(g.faces, np.int64), "body_frames": body,
+            "body_faces": np.asarray(b.faces, np.int64), "prior_frames": prior}
+
+
+@pytest.fixture
+def npz(tmp_path, scene):
+    path = tmp_path / "drape.npz"
+    np.savez(path, **scene, fps=np.float32(12))
+    return path
+
+
+@pytest.fixture
+def glb(tmp_path, scene):
+    from garsim.export import export_animation
+
+    return export_animation(tmp_path / "drape.glb", scene["frames"], scene["faces"], body_frames=scene["body_frames"],
+                            body_faces=scene["body_faces"], fps=12)[0]
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def test_readers_give_the_same_sequence(tmp_path, scene, npz, glb):
+    from garsim.export import write_obj_sequence
+    from garsim.geometry.io import save_mesh
+
+    a, b = load_view_data(npz), load_view_data(glb)
+    folder = tmp_path / "seq"
+    write_obj_sequence(folder, scene["frames"], scene["faces"], stem="shirt")
+    save_mesh(folder / "body.obj", scene["body_frames"][0], scene["body_faces"])  # one body: held still
+    c = load_view_data(folder)
+    assert a.fps == b.fps == 12 and a.num_frames == b.num_frames == c.num_frames == T
+    for d in (a, b, c):
+        np.testing.assert_allclose(d.frames, scene["frames"], atol=1e-5)
+        np.testing.assert_array_equal(d.faces, scene["faces"])
+    np.testing.assert_allclose(b.body_frames, scene["body_frames"], atol=1e-5)  # GLB: Y up back to Z up
+    np.testing.assert_allclose(c.body_frames, np.repeat(scene["body_frames"][:1], T, axis=0), atol=1e-5)
+    np.testing.assert_allclose(a.correction().max(), 0.02, atol=1e-6)
+    assert b.prior_frames is None and b.correction() is None
+    save_mesh(folder / "other.obj", scene["frames"][0], scene["faces"])
+    with pytest.raises(ValueError, match="several garment meshes"):
+        load_view_data(folder)
+    np.savez(tmp_path / "bad.npz", vertices=scene["frames"])
+    with pytest.raises(ValueError, match="'frames'"):
+        load_view_data(tmp_path / "bad.npz")
+
+
+def test_serve_npz_with_prior(npz, scene):
+    pytest.importorskip("viser")
+    from garsim.view import serve
+
+    viewer = serve(npz, host="127.0.0.1", port=_free_port(), block=False)
+    try:
+        with urllib.request.urlopen(viewer.url, timeout=10) as r:
+            assert r.status == 200 and "text/html" in r.headers.get("content-type", "")
+            assert "<html" in r.read().decode("utf-8", "replace").lower()
+        nodes = set(viewer.server.scene._handle_from_node_name)
+        assert {"/garment", "/body"} <= nodes
+        assert viewer.slider.min == 0 and viewer.slider.max == T - 1
+        viewer.slider.value = 2  # the slider drives the scene
+        assert viewer.frame == 2
+        np.testing.assert_allclose(viewer.body.vertices, scene["body_frames"][2], atol=1e-6)
+        np.testing.assert_allclose(viewer.garment_vertices(2), scene["frames"][2])
+        colors = viewer.garment_colors(2)  # |prediction - prior| as colour: varies over the garment
+        assert colors.shape == (len(scene["frames"][0]), 3) and np.ptp(colors, axis=0).max() > 0.3
+        viewer.show_prior.value = True
+        np.testing.assert_allclose(viewer.garment_vertices(2), scene["prior_frames"][2])
+        viewer.color_by_correction.value = False
+        assert np.ptp(viewer.garment_colors(2), axis=0).max() == 0
+        viewer.show_body.value = False
+        assert viewer.body.visible is False
+        viewer.show_garment.value = False
+        assert viewer.garment.visible is False
+    finally:
+        viewer.stop()
+
+
+def test_serve_glb_without_prior(glb):
+    pytest.importorskip("viser")
+    from garsim.view import serve
+
+    viewer = serve(glb, host="127.0.0.1", port=_free_port(), block=False)
+    try:
+        with urllib.request.urlopen(viewer.url, timeout=10) as r:
+            assert r.status == 200
+        assert viewer.show_prior is None and viewer.color_by_correction is None and viewer.slider.max == T - 1
+        viewer.slider.value = 1
+        assert viewer.frame == 1
+    finally:
+        viewer.stop()
+
+
+def test_missing_viser_is_one_line(npz, monkeypatch, capsys):
+    from garsim.cli import main
+
+    monkeypatch.setitem(sys.modules, "viser", None)  # import viser -> ImportError
+    from garsim.view import serve
+
+    with pytest.raises(ViewerUnavailable, match="pip install"):
+        serve(npz, block=False)
+    assert main(["view", str(npz)]) == 2
+    assert capsys.readouterr().err.strip() == VIEWER_NEEDS
+    assert main(["view", str(npz.with_name("missing.npz"))]) == 2
+    assert "no such file" in capsys.readouterr().err
+
+
+def test_import_garsim_does_not_import_viser():
+    code = "import sys, garsim, garsim.view, garsim.cli; sys.exit('viser' in sys.modules)"
+    assert subprocess.run([sys.executable, "-c", code], timeout=120).returncode == 0
