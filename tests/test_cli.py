@@ -9,7 +9,7 @@ from garsim.data.store import DatasetStore
 
 
 def test_data_info_and_verify(tmp_path, capsys):
-    from test_data_store import make_record
+    from store_fixtures import make_record
 
     store = DatasetStore(tmp_path)
     store.append_manifest(store.write_sequence(make_record("s0")))

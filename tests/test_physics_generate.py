@@ -73,7 +73,7 @@ def test_bad_config():
 
 def _fake_job(job, config):
     """Stand-in for the Newton run (tests the orchestration: resume, rejections, transient errors)."""
-    from test_data_store import make_record
+    from store_fixtures import make_record
 
     from garsim.physics.newton_sim import SimulationRejected
 

@@ -1,7 +1,7 @@
 """Training data from a store: whole sequences held out for validation; low, full or both resolutions."""
 
 import pytest
-from test_data_store import make_record
+from store_fixtures import make_record
 
 from garsim.data.store import DatasetStore
 from garsim.train.data import train_val_samples
