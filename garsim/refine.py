@@ -112,8 +112,19 @@ class _Pieces:
         self.cc = (self.ac * self.ac).sum(1)
         self.bc = (self.ab * self.ac).sum(1)
         cen = pts.mean(1)
-        self.radius = float(np.linalg.norm(pts - cen[:, None], axis=2).max())
+        rad = np.linalg.norm(pts - cen[:, None], axis=2).max(1)
+        self.radius = float(rad.max())
         self.tree = cKDTree(cen)
+        # size classes (radius halving): the search bound uses each class's own radius, so a region of
+        # small pieces needs few candidates even where a few big pieces exist elsewhere
+        self.classes = []
+        hi = self.radius
+        for level in range(4):
+            lo = hi / 2 if level < 3 else -1.0
+            ids = np.nonzero((rad <= hi) & (rad > lo))[0]
+            if len(ids):
+                self.classes.append((cKDTree(cen[ids]), ids, float(rad[ids].max())))
+            hi = lo
         # pseudo-normals: a piece corner or edge inherits the parent feature it lies on (exact zeros
         # survive halving), else the parent face normal
         nz = bary > 0
@@ -185,38 +196,48 @@ class _Pieces:
         s = np.einsum("md,md->m", p - close, self.feature_normal(piece, v, w))
         return np.where(s < 0, -1.0, 1.0)
 
-    def search(self, p: np.ndarray, todo: np.ndarray, ub: float) -> tuple[np.ndarray, tuple, np.ndarray]:
-        """Exact closest pieces of the points ``p[todo]``, unless proven farther than ``ub - radius``.
+    def search(self, p: np.ndarray, todo: np.ndarray, reach: float) -> tuple[np.ndarray, tuple, np.ndarray]:
+        """Exact closest pieces of the points ``p[todo]``, unless proven farther than ``reach``.
 
-        The candidate set (nearest centroids) grows 4x until it provably holds the closest piece
-        (best distance <= k-th centroid distance - radius). Returns (resolved indices, their
-        (distance, piece, v, w, closest), far indices).
+        Per size class, the candidate set (nearest centroids within reach + class radius) grows 4x until
+        it provably holds the closest piece (best distance <= k-th centroid distance - class radius).
+        Returns (resolved indices, their (distance, piece, v, w, closest), far indices).
         """
         res_idx, res, far_idx = [], [], []
-        k = min(8, self.num)
+        k = 8
         while len(todo):
-            dc, cand = self.tree.query(p[todo], k=k, distance_upper_bound=ub)
-            dc = np.asarray(dc).reshape(len(todo), k)
-            cand = np.asarray(cand, dtype=np.int64).reshape(len(todo), k)
-            has = np.isfinite(dc[:, 0])  # no centroid within ub: farther than ub - radius
+            dcs, cands, lbs = [], [], []
+            for tree, ids, rc in self.classes:
+                kc = min(k, len(ids))
+                dc, cand = tree.query(p[todo], k=kc, distance_upper_bound=reach + rc)
+                dc = np.asarray(dc).reshape(len(todo), kc)
+                cand = np.asarray(cand, dtype=np.int64).reshape(len(todo), kc)
+                valid = np.isfinite(dc)
+                cands.append(np.where(valid, ids[np.minimum(cand, len(ids) - 1)], -1))
+                dcs.append(dc)
+                full = valid[:, -1] & (kc < len(ids))
+                lbs.append(np.where(full, dc[:, -1] - rc, np.inf))  # every untested piece of the class
+            dc = np.concatenate(dcs, 1)
+            cand = np.concatenate(cands, 1)
+            lb = np.min(np.stack(lbs, 1), axis=1)
+            valid = cand >= 0
+            has = valid.any(1)  # nothing within reach + class radius in any class: farther than reach
             if (~has).any():
                 far_idx.append(todo[~has])
-            todo, dc, cand = todo[has], dc[has], cand[has]
+            todo, cand, valid, lb = todo[has], cand[has], valid[has], lb[has]
             if not len(todo):
                 break
-            valid = np.isfinite(dc)
-            cand = np.where(valid, cand, cand[:, :1])
+            first = cand[np.arange(len(cand)), np.argmax(valid, axis=1)]
+            cand = np.where(valid, cand, first[:, None])
             dd, pc, vv, ww, qq = self.closest(p[todo], cand)
-            full = valid[:, -1] & (k < self.num)
-            lb = np.where(full, dc[:, -1] - self.radius, np.inf)  # every untested piece is at least this far
             proven = dd <= lb
-            far = ~proven & (np.minimum(dd, lb) > ub - self.radius)
+            far = ~proven & (np.minimum(dd, lb) > reach)
             res_idx.append(todo[proven])
             res.append((dd[proven], pc[proven], vv[proven], ww[proven], qq[proven]))
             if far.any():
                 far_idx.append(todo[far])
             todo = todo[~proven & ~far]
-            k = min(4 * k, self.num)
+            k = 4 * k
         if res_idx:
             best = tuple(np.concatenate([r[i] for r in res]) for i in range(5))
             idx = np.concatenate(res_idx)
@@ -282,7 +303,7 @@ class _Obstacle:
         if m == 0:
             return sdist, close, normal, exact
         fine, coarse = self.fine, self.coarse
-        near, best, far = fine.search(p, np.arange(m), band + fine.radius)
+        near, best, far = fine.search(p, np.arange(m), band)
         if len(far):
             ub = max(reach, band) + coarse.radius
             sel = np.ones(len(far), dtype=bool) if far_outside is None else ~np.asarray(far_outside, bool)[far]

@@ -50,6 +50,7 @@ def test_drape_once_matches_predict(anny_body, model):
 
 
 def test_bench_newton_tiny(anny_body):
+    pytest.importorskip("newton")
     from garsim.eval.bench import bench_newton
 
     res = bench_newton((200,), motion_frames=4, body=anny_body)
