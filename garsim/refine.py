@@ -60,6 +60,8 @@ EDGE_SAMPLES = (0.25, 0.5, 0.75)
 """Edge parameters tested against the obstacle for (c)."""
 RELAXATION = 1.5
 """Over-relaxation of the averaged Jacobi stretch sweeps (1 = plain averaging; < 2 is stable)."""
+MAX_CANDIDATES = 32
+"""Candidate pieces per point at most in the near-surface search (the proof of exactness usually needs 8-32)."""
 _STRETCH_TOL = 1e-3  # relative: an edge within limit * (1 + this) counts as satisfied
 _DIST_TOL = 1e-6  # m
 
@@ -115,16 +117,6 @@ class _Pieces:
         rad = np.linalg.norm(pts - cen[:, None], axis=2).max(1)
         self.radius = float(rad.max())
         self.tree = cKDTree(cen)
-        # size classes (radius halving): the search bound uses each class's own radius, so a region of
-        # small pieces needs few candidates even where a few big pieces exist elsewhere
-        self.classes = []
-        hi = self.radius
-        for level in range(4):
-            lo = hi / 2 if level < 3 else -1.0
-            ids = np.nonzero((rad <= hi) & (rad > lo))[0]
-            if len(ids):
-                self.classes.append((cKDTree(cen[ids]), ids, float(rad[ids].max())))
-            hi = lo
         # pseudo-normals: a piece corner or edge inherits the parent feature it lies on (exact zeros
         # survive halving), else the parent face normal
         nz = bary > 0
@@ -197,47 +189,41 @@ class _Pieces:
         return np.where(s < 0, -1.0, 1.0)
 
     def search(self, p: np.ndarray, todo: np.ndarray, reach: float) -> tuple[np.ndarray, tuple, np.ndarray]:
-        """Exact closest pieces of the points ``p[todo]``, unless proven farther than ``reach``.
+        """Closest pieces of the points ``p[todo]``, unless farther than ``reach``.
 
-        Per size class, the candidate set (nearest centroids within reach + class radius) grows 4x until
-        it provably holds the closest piece (best distance <= k-th centroid distance - class radius).
-        Returns (resolved indices, their (distance, piece, v, w, closest), far indices).
+        Candidates are the nearest centroids within ``reach`` + radius; their number grows 4x until the
+        set provably holds the closest piece (best distance <= k-th centroid distance - radius), up
+        to ``MAX_CANDIDATES`` for a finite ``reach`` (then the best found is taken: exact except where
+        tiny and big pieces meet) and without limit otherwise. Returns (resolved indices, their
+        (distance, piece, v, w, closest), far indices).
         """
         res_idx, res, far_idx = [], [], []
-        k = 8
+        k = min(8, self.num)
+        ub = reach + self.radius
         while len(todo):
-            dcs, cands, lbs = [], [], []
-            for tree, ids, rc in self.classes:
-                kc = min(k, len(ids))
-                dc, cand = tree.query(p[todo], k=kc, distance_upper_bound=reach + rc)
-                dc = np.asarray(dc).reshape(len(todo), kc)
-                cand = np.asarray(cand, dtype=np.int64).reshape(len(todo), kc)
-                valid = np.isfinite(dc)
-                cands.append(np.where(valid, ids[np.minimum(cand, len(ids) - 1)], -1))
-                dcs.append(dc)
-                full = valid[:, -1] & (kc < len(ids))
-                lbs.append(np.where(full, dc[:, -1] - rc, np.inf))  # every untested piece of the class
-            dc = np.concatenate(dcs, 1)
-            cand = np.concatenate(cands, 1)
-            lb = np.min(np.stack(lbs, 1), axis=1)
-            valid = cand >= 0
-            has = valid.any(1)  # nothing within reach + class radius in any class: farther than reach
+            dc, cand = self.tree.query(p[todo], k=k, distance_upper_bound=ub)
+            dc = np.asarray(dc).reshape(len(todo), k)
+            cand = np.asarray(cand, dtype=np.int64).reshape(len(todo), k)
+            has = np.isfinite(dc[:, 0])  # no centroid within ub: farther than reach
             if (~has).any():
                 far_idx.append(todo[~has])
-            todo, cand, valid, lb = todo[has], cand[has], valid[has], lb[has]
+            todo, dc, cand = todo[has], dc[has], cand[has]
             if not len(todo):
                 break
-            first = cand[np.arange(len(cand)), np.argmax(valid, axis=1)]
-            cand = np.where(valid, cand, first[:, None])
+            valid = np.isfinite(dc)
+            cand = np.where(valid, cand, cand[:, :1])
             dd, pc, vv, ww, qq = self.closest(p[todo], cand)
-            proven = dd <= lb
-            far = ~proven & (np.minimum(dd, lb) > reach)
+            full = valid[:, -1] & (k < self.num)
+            lb = np.where(full, dc[:, -1] - self.radius, np.inf)  # every untested piece is at least this far
+            last = np.isfinite(reach) and k >= MAX_CANDIDATES
+            proven = (dd <= lb) | (last & (dd <= reach))
+            far = ~proven & (np.minimum(dd, lb) > reach) | (last & ~proven)
             res_idx.append(todo[proven])
             res.append((dd[proven], pc[proven], vv[proven], ww[proven], qq[proven]))
             if far.any():
                 far_idx.append(todo[far])
             todo = todo[~proven & ~far]
-            k = 4 * k
+            k = min(4 * k, self.num)
         if res_idx:
             best = tuple(np.concatenate([r[i] for r in res]) for i in range(5))
             idx = np.concatenate(res_idx)
@@ -395,13 +381,13 @@ def _faces(a, name: str, n: int) -> np.ndarray:
     return f.astype(np.int64, copy=False)
 
 
-def default_max_stretch(fabric: "str | Fabric") -> float:
+def default_max_stretch(fabric: str | Fabric) -> float:
     """The edge-length limit for a fabric: 1.10 for the presets, up to 1.15 for a very soft membrane."""
     s = get_fabric(fabric).stretch
     return float(min(MAX_DEFAULT_STRETCH, DEFAULT_STRETCH + float(np.clip(0.05 * np.log10(3.0e3 / s), 0.0, 0.05))))
 
 
-def smoothing_weight(fabric: "str | Fabric", edge_length: float) -> float:
+def smoothing_weight(fabric: str | Fabric, edge_length: float) -> float:
     """Weight of the one-ring diffusion of the correction: 0.5 * l_b / (l_b + edge length), l_b the bending length."""
     lb = get_fabric(fabric).bending_length
     return float(0.5 * lb / (lb + max(edge_length, 1e-6)))
@@ -417,7 +403,7 @@ def refine(
     faces: np.ndarray,
     body_vertices: np.ndarray,
     body_faces: np.ndarray,
-    fabric: "str | Fabric" = "cotton",
+    fabric: str | Fabric = "cotton",
     pinned: np.ndarray | None = None,
     iterations: int = 10,
     margin: float = 0.002,

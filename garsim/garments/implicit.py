@@ -2,7 +2,7 @@
 
 A garment here is a level set of a scalar field built around the canonical (T-pose) body, cut open
 by keep-regions, meshed by marching cubes and isotropically remeshed (pymeshlab), so its
-triangulation is irregular, unlike the parametric ring grids of ``templates.py`` (no code shared).
+triangulation is irregular, unlike the parametric ring grids of ``garments/templates/`` (no code shared).
 
 Pipeline (all vectorised numpy; one short Python loop over height slices for the hull fields):
 

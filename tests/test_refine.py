@@ -1,0 +1,190 @@
+"""garsim.refine: stretch limit, body contact, edges through the body, no-op on valid drapes, symmetry."""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+import pytest
+import trimesh
+
+from garsim.geometry.mesh import unique_edges
+from garsim.refine import default_max_stretch, obstacle, refine
+
+
+def _grid(n: int = 12, h: float = 0.02) -> tuple[np.ndarray, np.ndarray]:
+    """A flat n x n sheet in the z = 0 plane, centred at the origin, spacing h."""
+    u = (np.arange(n) - (n - 1) / 2) * h
+    xx, yy = np.meshgrid(u, u, indexing="ij")
+    v = np.stack([xx.ravel(), yy.ravel(), np.zeros(n * n)], 1)
+    idx = np.arange(n * n).reshape(n, n)
+    a, b, c, d = idx[:-1, :-1].ravel(), idx[1:, :-1].ravel(), idx[1:, 1:].ravel(), idx[:-1, 1:].ravel()
+    f = np.concatenate([np.stack([a, b, c], 1), np.stack([a, c, d], 1)])
+    return v, f
+
+
+def _stretch(x, tpl, f):
+    e = unique_edges(f)
+    return np.linalg.norm(x[e[:, 1]] - x[e[:, 0]], axis=1) / np.linalg.norm(tpl[e[:, 1]] - tpl[e[:, 0]], axis=1)
+
+
+def _cap(radius: float, clearance: float = 0.005, n: int = 14):
+    """A spherical cap garment (grid mapped onto the sphere's top) at ``clearance`` outside the sphere."""
+    v, f = _grid(n, 0.02)
+    r = radius + clearance
+    ang = np.linalg.norm(v[:, :2], axis=1) / r
+    direction = np.where(ang[:, None] > 0, v[:, :2] / np.maximum(np.linalg.norm(v[:, :2], axis=1), 1e-12)[:, None], 0)
+    cap = np.concatenate([direction * np.sin(ang)[:, None] * r, np.cos(ang)[:, None] * r], 1)
+    return cap, f
+
+
+@pytest.fixture(scope="module")
+def sphere():
+    m = trimesh.creation.icosphere(subdivisions=4, radius=0.15)
+    return np.asarray(m.vertices), np.asarray(m.faces, dtype=np.int64)
+
+
+def _signed(points, bv, bf):
+    d, _, _, _ = obstacle(bv, bf).query(np.asarray(points, np.float64), 1.0, reach=1.0)
+    return d
+
+
+def test_stretched_region_comes_back_within_limit(sphere):
+    bv, bf = sphere
+    bv = bv + np.array([0.0, 0.0, -1.0])  # obstacle far away
+    tpl, f = _grid(12, 0.02)
+    x = tpl.copy()
+    centre = np.linalg.norm(tpl[:, :2], axis=1) < 0.035
+    x[centre, :2] *= 3.0  # a region stretched 3x
+    x[centre, 2] += 0.01
+    assert _stretch(x, tpl, f).max() > 2.0
+    out = refine(x, tpl, f, bv, bf, "cotton")
+    limit = default_max_stretch("cotton")
+    assert limit == pytest.approx(1.10)
+    assert _stretch(out, tpl, f).max() <= limit * 1.002
+    assert np.isfinite(out).all()
+
+
+def test_pushed_into_sphere_ends_outside(sphere):
+    bv, bf = sphere
+    cap, f = _cap(0.15)
+    x = cap - np.array([0, 0, 0.02])  # 2 cm into the sphere
+    assert (_signed(x, bv, bf) < 0).sum() > 20
+    out = refine(x, cap, f, bv, bf, "cotton", margin=0.002)
+    d = _signed(out, bv, bf)
+    assert d.min() >= 0.002 - 1e-5
+    e = unique_edges(f)
+    ts = np.linspace(0.1, 0.9, 9)
+    samples = (1 - ts[None, :, None]) * out[e[:, 0], None] + ts[None, :, None] * out[e[:, 1], None]
+    assert _signed(samples.reshape(-1, 3), bv, bf).min() > -0.002 - 1e-4  # no edge through the sphere
+    assert np.percentile(_stretch(out, cap, f), 99) <= 1.15
+
+
+def test_limb_through_cloth_is_pushed_off():
+    v, f = _grid(9, 0.03)
+    # a limb (capped cylinder, radius 1 cm, axis along y) lying under the sheet between two vertex columns
+    limb = trimesh.creation.cylinder(radius=0.01, height=0.5, sections=48)
+    limb.apply_transform(trimesh.transformations.rotation_matrix(np.pi / 2, [1, 0, 0]))
+    limb.apply_translation([0.015, 0.0, -0.003])
+    bv, bf = np.asarray(limb.vertices), np.asarray(limb.faces, dtype=np.int64)
+    dv = _signed(v, bv, bf)
+    assert dv.min() >= 0.002  # every vertex is outside the limb ...
+    e = unique_edges(f)
+    mid = 0.5 * (v[e[:, 0]] + v[e[:, 1]])
+    assert _signed(mid, bv, bf).min() < -0.005  # ... but edges cut through it
+    out = refine(v, v, f, bv, bf, "cotton")
+    ts = np.asarray([0.25, 0.5, 0.75])
+    samples = (1 - ts[None, :, None]) * out[e[:, 0], None] + ts[None, :, None] * out[e[:, 1], None]
+    assert _signed(samples.reshape(-1, 3), bv, bf).min() >= -0.002 - 1e-4
+    assert _signed(out, bv, bf).min() >= 0.002 - 1e-5
+
+
+def test_valid_drape_unchanged_and_pinned_fixed(sphere):
+    bv, bf = sphere
+    cap, f = _cap(0.15, clearance=0.004)
+    out = refine(cap, cap, f, bv, bf, "denim")
+    assert np.abs(out - cap).max() < 1e-4
+    # pinned vertices never move, even inside the body
+    x = cap - np.array([0, 0, 0.02])
+    pinned = np.zeros(len(x), dtype=bool)
+    pinned[::7] = True
+    out = refine(x, cap, f, bv, bf, "cotton", pinned=pinned)
+    assert np.array_equal(out[pinned], x[pinned])
+    assert _signed(out[~pinned], bv, bf).min() >= 0.002 - 1e-5
+
+
+def test_permutation_and_yaw_translation_equivariance(sphere):
+    bv, bf = sphere
+    cap, f = _cap(0.15)
+    x = cap - np.array([0.01, 0.0, 0.02])
+    x[5, :2] *= 2.5  # plus a stretched spot
+    base = refine(x, cap, f, bv, bf, "cotton")
+    perm = np.random.default_rng(0).permutation(len(x))
+    inv = np.argsort(perm)
+    out_p = refine(x[perm], cap[perm], inv[f], bv, bf, "cotton")
+    assert np.abs(out_p[inv] - base).max() <= 1e-5
+    th = 0.7
+    rot = np.array([[np.cos(th), -np.sin(th), 0], [np.sin(th), np.cos(th), 0], [0, 0, 1.0]])
+    shift = np.array([0.3, -0.2, 0.1])
+    out_r = refine(x @ rot.T + shift, cap @ rot.T + shift, f, bv @ rot.T + shift, bf, "cotton")
+    assert np.abs((out_r - shift) @ rot - base).max() <= 1e-5
+
+
+@pytest.mark.parametrize(
+    "kwargs, match",
+    [
+        (dict(garment=np.zeros((5, 2))), "garment"),
+        (dict(template=np.zeros((4, 3))), "template"),
+        (dict(garment=np.full((5, 3), np.nan)), "finite"),
+        (dict(body_vertices=np.array([[np.nan, 0, 0]] * 4)), "finite"),
+        (dict(faces=np.array([[0, 1, 9]])), "faces"),
+        (dict(pinned=np.zeros(3, dtype=bool)), "pinned"),
+        (dict(max_stretch=0.9), "max_stretch"),
+        (dict(margin=-1.0), "margin"),
+        (dict(iterations=0), "iterations"),
+        (dict(fabric="velvet"), "fabric"),
+    ],
+)
+def test_bad_inputs_raise_one_line_value_error(kwargs, match):
+    tet_v = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1.0]])
+    tet_f = np.array([[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]])
+    args = dict(
+        garment=np.zeros((5, 3)) + 2.0,
+        template=np.zeros((5, 3)) + 2.0,
+        faces=np.array([[0, 1, 2], [2, 3, 4]]),
+        body_vertices=tet_v,
+        body_faces=tet_f,
+    )
+    args.update(kwargs)
+    with pytest.raises(ValueError, match=match) as info:
+        refine(**args)
+    assert "\n" not in str(info.value)
+
+
+def test_anny_skirt_moved_inward(anny_body):
+    from garsim.garments.templates import make_garment
+    from garsim.geometry.inside import InsideTester
+
+    body = anny_body.canonical()
+    bv, bf = np.asarray(body.vertices), np.asarray(anny_body.faces)
+    g = make_garment("skirt", anny_body, target_vertices=600)
+    tpl = g.vertices.astype(np.float64)
+    axis = tpl[:, :2].mean(0)
+    radial = tpl[:, :2] - axis
+    radial /= np.linalg.norm(radial, axis=1, keepdims=True)
+    x = tpl.copy()
+    x[:, :2] -= 0.015 * radial  # 1.5 cm toward the body axis
+    refine(x, tpl, g.faces, bv, bf, "cotton", pinned=g.pinned)  # warm the per-body cache
+    t0 = time.process_time()
+    out = refine(x, tpl, g.faces, bv, bf, "cotton", pinned=g.pinned)
+    ms = 1e3 * (time.process_time() - t0)
+    t0 = time.process_time()
+    refine(tpl, tpl, g.faces, bv, bf, "cotton", pinned=g.pinned)
+    ms_valid = 1e3 * (time.process_time() - t0)
+    print(f"refine anny skirt {len(x)} v: {ms:.1f} ms moved-in, {ms_valid:.1f} ms valid (process time)")
+    inside = InsideTester(bv, bf).inside(out)
+    assert inside.mean() < 0.005
+    assert np.percentile(_stretch(out, tpl, g.faces), 99) <= 1.15
+    free = ~g.pinned
+    assert _signed(out[free], bv, bf).min() >= 0.002 - 1e-5
+    assert np.array_equal(out[g.pinned], x[g.pinned].astype(out.dtype))
