@@ -35,9 +35,13 @@ def main() -> None:
     canonical, target = body.canonical(), body.pose(pose)
     rows = {"Anny forward (one pose, 13,718 v)": median_ms(lambda: body.pose(pose))}
     for kind in ("skirt", "top", "tshirt", "trousers", "dress"):
-        rows[f"template build: {kind}, 2,500 v"] = median_ms(lambda k=kind: make_garment(k, body, target_vertices=2500), 3)
+        rows[f"template build: {kind}, 2,500 v"] = median_ms(
+            lambda k=kind: make_garment(k, body, target_vertices=2500), 3
+        )
     g = make_garment("skirt", body, target_vertices=2500)
-    rows[f"LBS prior ({g.num_vertices} v skirt)"] = median_ms(lambda: garment_prior(body, canonical, target, g.vertices))
+    rows[f"LBS prior ({g.num_vertices} v skirt)"] = median_ms(
+        lambda: garment_prior(body, canonical, target, g.vertices)
+    )
     tester = InsideTester(target.vertices, body.faces)
     rows[f"inside test ({g.num_vertices} points)"] = median_ms(lambda: tester.inside(g.vertices))
     base = rows["Anny forward (one pose, 13,718 v)"]

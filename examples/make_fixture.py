@@ -23,8 +23,11 @@ def main() -> None:
     entries = [e for e in store.entries() if e["split"] in ("test", "ood", "train")]
     chosen: dict[str, str] = {}
     for e in sorted(entries, key=lambda e: (e["split"] != "test", e["id"])):
-        for key in (f"{e['garment_type']}/{e.get('construction')}", f"pose/{e.get('canonical_pose')}",
-                    f"fabric/{e.get('fabric_name')}"):
+        for key in (
+            f"{e['garment_type']}/{e.get('construction')}",
+            f"pose/{e.get('canonical_pose')}",
+            f"fabric/{e.get('fabric_name')}",
+        ):
             chosen.setdefault(key, e["id"])
     groups: dict[str, list[str]] = {}
     for e in entries:

@@ -1,7 +1,8 @@
 """Write the result figures of a trained model into docs/: training curve, fabric awareness,
 error maps of test samples (model vs prior).
 
-Run: .venv/bin/python examples/make_report.py --run ~/garsim-runs/v1 --data ~/garsim-data/v1 --results docs/results_low.json
+Run: .venv/bin/python examples/make_report.py --run ~/garsim-runs/v1 --data ~/garsim-data/v2 \
+    --results docs/results.json
 """
 
 from __future__ import annotations
@@ -33,8 +34,14 @@ def main() -> None:
     if "fabric_distance_mm" in results:
         fab = results["fabric_distance_mm"]
         values = {f: {s: fab[s][f] for s in fab if f in fab[s]} for f in fab["garsim"]}
-        print(plot_bars(values, "mean garment-to-body distance (mm)",
-                        "Fabric awareness: the same test skirts predicted in each fabric", docs / "fabric_awareness.png"))
+        print(
+            plot_bars(
+                values,
+                "mean garment-to-body distance (mm)",
+                "Fabric awareness: the same test skirts predicted in each fabric",
+                docs / "fabric_awareness.png",
+            )
+        )
     sim = GarSim.load(args.model) if args.model else GarSim.pretrained()
     store = DatasetStore(args.data)
     recs = [r for r in store.sequences("test")][: args.samples]
@@ -47,8 +54,17 @@ def main() -> None:
             panels.append([(s.body_target, s.body_faces), (verts, s.garment_faces)])
             colors.append([None, np.clip(err, 0, 150)])
             titles.append(f"{rec.garment_type}/{rec.fabric} {name}: {err.mean():.0f} mm")
-    print(render_grid(docs / "test_predictions.png", panels, ncols=3, titles=titles, views=("front",),
-                      colors=colors, suptitle="Test split (unseen garments, bodies, poses): error to Newton, 0-150 mm"))
+    print(
+        render_grid(
+            docs / "test_predictions.png",
+            panels,
+            ncols=3,
+            titles=titles,
+            views=("front",),
+            colors=colors,
+            suptitle="Test split (unseen garments, bodies, poses): error to Newton, 0-150 mm",
+        )
+    )
 
 
 if __name__ == "__main__":

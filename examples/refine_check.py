@@ -17,10 +17,10 @@ from garsim.geometry.mesh import unique_edges
 from garsim.refine import obstacle, refine
 
 
-def _ms(fn, repeat: int = 5) -> float:
+def _ms(args: tuple, kwargs: dict, repeat: int = 5) -> float:
     t0 = time.process_time()
     for _ in range(repeat):
-        fn()
+        refine(*args, **kwargs)
     return 1e3 * (time.process_time() - t0) / repeat
 
 
@@ -42,8 +42,8 @@ def main(sizes: list[int]) -> None:
         e = unique_edges(g.faces)
         rest = np.linalg.norm(tpl[e[:, 1]] - tpl[e[:, 0]], axis=1)
         stretch = np.linalg.norm(out[e[:, 1]] - out[e[:, 0]], axis=1) / rest
-        t_valid = _ms(lambda: refine(tpl, tpl, g.faces, bv, bf, pinned=g.pinned))
-        t_moved = _ms(lambda: refine(x, tpl, g.faces, bv, bf, pinned=g.pinned))
+        t_valid = _ms((tpl, tpl, g.faces, bv, bf), {"pinned": g.pinned})
+        t_moved = _ms((x, tpl, g.faces, bv, bf), {"pinned": g.pinned})
         print(
             f"{len(tpl)} v: valid {t_valid:.1f} ms, moved-in {t_moved:.1f} ms; inside before "
             f"{tester.inside(x).mean():.3%} after {tester.inside(out).mean():.3%}; "

@@ -62,11 +62,22 @@ def main() -> None:
             groups.setdefault(e["job"], []).append(e)
     full = [g for g in groups.values() if len(g) == 4]
     if full:
-        group = sorted(full[int(rng.integers(len(full)))], key=lambda e: ["silk", "cotton", "denim", "leather"].index(e["fabric"]))
+        group = sorted(
+            full[int(rng.integers(len(full)))], key=lambda e: ["silk", "cotton", "denim", "leather"].index(e["fabric"])
+        )
         for e in group:
             add_target(e, f"paired {e['job']}: {e['fabric']}")
-    print(render_grid(args.out, panels, ncols=4, titles=titles, views=("front", "side"), size=300,
-                      suptitle="Newton VBD ground truth v2: settled samples on their target poses"))
+    print(
+        render_grid(
+            args.out,
+            panels,
+            ncols=4,
+            titles=titles,
+            views=("front", "side"),
+            size=300,
+            suptitle="Newton VBD ground truth v2: settled samples on their target poses",
+        )
+    )
 
 
 if __name__ == "__main__":

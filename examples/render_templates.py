@@ -30,8 +30,16 @@ def main() -> None:
             panels.append([(c.vertices, body.faces), (g.vertices, g.faces)])
             titles.append(f"{kind} on {name} body ({g.num_vertices} v, {int(g.pinned.sum())} pinned)")
     Path(args.out).parent.mkdir(parents=True, exist_ok=True)
-    print(render_grid(args.out, panels, ncols=len(KINDS), titles=titles, views=("front", "side"),
-                      suptitle="garsim templates on two Anny bodies (canonical T-pose)"))
+    print(
+        render_grid(
+            args.out,
+            panels,
+            ncols=len(KINDS),
+            titles=titles,
+            views=("front", "side"),
+            suptitle="garsim templates on two Anny bodies (canonical T-pose)",
+        )
+    )
 
 
 if __name__ == "__main__":

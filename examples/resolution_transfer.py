@@ -28,13 +28,17 @@ def main() -> None:
     parser.add_argument("--data", required=True)
     parser.add_argument("--model", default=None, help="model folder (default: the shipped model)")
     parser.add_argument("--split", default="test")
-    parser.add_argument("--coarse", type=int, nargs="+", default=[250, 500], help="max_vertices of the carried-back variants")
+    parser.add_argument(
+        "--coarse", type=int, nargs="+", default=[250, 500], help="max_vertices of the carried-back variants"
+    )
     parser.add_argument("--out", default=None)
     args = parser.parse_args()
     model = (GarSim.load(args.model) if args.model else GarSim.pretrained()).model
     methods = {
         "network at 800 v": GarSim(model, collision_margin=None, max_vertices=None),
-        **{f"network at {c} v, carried back": GarSim(model, collision_margin=None, max_vertices=c) for c in args.coarse},
+        **{
+            f"network at {c} v, carried back": GarSim(model, collision_margin=None, max_vertices=c) for c in args.coarse
+        },
         "prior": GarSim.prior_only(),
     }
     errors: dict[str, dict[str, list[float]]] = {m: defaultdict(list) for m in methods}
@@ -47,8 +51,10 @@ def main() -> None:
             e = euclidean_error_mm(pred, s.target)
             errors[name][s.garment_type].append(e)
             errors[name]["all"].append(e)
-    table = {m: {**{k: float(np.mean(v)) for k, v in sorted(per.items())}, "cpu_ms": float(np.median(cpu[m]))}
-             for m, per in errors.items()}
+    table = {
+        m: {**{k: float(np.mean(v)) for k, v in sorted(per.items())}, "cpu_ms": float(np.median(cpu[m]))}
+        for m, per in errors.items()
+    }
     for m, per in table.items():
         print(f"{m:40s} " + "  ".join(f"{k} {v:.1f}" + ("" if k == "cpu_ms" else " mm") for k, v in per.items()))
     if args.out:

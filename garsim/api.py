@@ -50,21 +50,28 @@ def fabric_fields(fabric: Any) -> tuple[str, dict[str, float] | None]:
         try:
             fabric = fabric_from_values(dict(fabric))
         except TypeError as exc:
-            raise ValueError(f"fabric values must be bending, density, stretch (and optional friction, "
-                             f"damping, thickness): {exc}") from None
+            raise ValueError(
+                f"fabric values must be bending, density, stretch (and optional friction, damping, thickness): {exc}"
+            ) from None
     if isinstance(fabric, Fabric):
-        return (fabric.name, None) if fabric.name in FABRICS and fabric == get_fabric(fabric.name) \
+        return (
+            (fabric.name, None)
+            if fabric.name in FABRICS and fabric == get_fabric(fabric.name)
             else (CUSTOM_FABRIC, fabric.values())
-    raise ValueError(f"fabric must be a preset name ({', '.join(FABRICS)}), a Fabric or a dict of physical values, "
-                     f"got {type(fabric).__name__}")
+        )
+    raise ValueError(
+        f"fabric must be a preset name ({', '.join(FABRICS)}), a Fabric or a dict of physical values, "
+        f"got {type(fabric).__name__}"
+    )
 
 
 UNITS: dict[str, float] = {"m": 1.0, "cm": 0.01, "mm": 0.001}
 """Length units accepted at the API boundary (metres per unit)."""
 BODY_HEIGHT_RANGE = (0.4, 2.6)
 """Plausible standing body heights in metres: outside it the input is in other units (or not a body)."""
-FAR_FROM_BODY = 0.10
-"""m: a garment whose median vertex is farther than this from the canonical body does not surround it."""
+FAR_FROM_BODY = 0.25
+"""m: a garment whose median vertex is farther than this from the canonical body does not surround it (lenient:
+the hem of a full maxi skirt hangs well beyond 10 cm)."""
 
 
 def to_internal(vertices: np.ndarray, up: str = "z", units: str = "m") -> np.ndarray:
@@ -88,8 +95,10 @@ def check_scene(body: np.ndarray, garment: np.ndarray) -> None:
     extent = body.max(axis=0) - body.min(axis=0)
     if extent[2] < 0.6 * extent.max():  # a T-pose's arm span may match its height; lying down it is far taller
         axis = "XYZ"[int(np.argmax(extent))]
-        raise MeshError(f"the canonical body's longest axis is {axis}, not Z (up): for a Y-up file (Blender, glTF) "
-                        "pass up='y' (CLI: --up y)")
+        raise MeshError(
+            f"the canonical body's longest axis is {axis}, not Z (up): for a Y-up file (Blender, glTF) "
+            "pass up='y' (CLI: --up y)"
+        )
     height = float(extent[2])
     if not (BODY_HEIGHT_RANGE[0] <= height <= BODY_HEIGHT_RANGE[1]):
         hint = "cm" if 40 <= height <= 260 else "mm" if 400 <= height <= 2600 else None
@@ -99,8 +108,10 @@ def check_scene(body: np.ndarray, garment: np.ndarray) -> None:
 
     dist = cached_tree(body).query(garment)[0]
     if float(np.median(dist)) > FAR_FROM_BODY:
-        raise MeshError(f"the garment's median vertex is {100 * float(np.median(dist)):.0f} cm from the canonical body: "
-                        "it must be draped on the canonical body (same position, axis and units)")
+        raise MeshError(
+            f"the garment's median vertex is {100 * float(np.median(dist)):.0f} cm from the canonical body: "
+            "it must be draped on the canonical body (same position, axis and units)"
+        )
 
 
 def make_sample(
@@ -188,8 +199,14 @@ class GarSim:
             log.warning("could not decimate the garment (%s); running the network on all %d vertices", exc, n)
             return self.model.predict(sample)
         low_prior = transfer_barycentric(sample.prior, to_low)
-        low_sample = dataclasses.replace(sample, garment=low.vertices, garment_faces=low.faces, pinned=low.pinned,
-                                         prior=low_prior.astype(np.float32), target=None)
+        low_sample = dataclasses.replace(
+            sample,
+            garment=low.vertices,
+            garment_faces=low.faces,
+            pinned=low.pinned,
+            prior=low_prior.astype(np.float32),
+            target=None,
+        )
         correction = self.model.predict(low_sample) - low_prior
         return (sample.prior + transfer_barycentric(correction, to_full)).astype(np.float32)
 
@@ -209,11 +226,11 @@ class GarSim:
         return "GarSim model" if self.model is not None else "skinning prior"
 
     @classmethod
-    def prior_only(cls) -> "GarSim":
+    def prior_only(cls) -> GarSim:
         return cls(model=None)
 
     @classmethod
-    def pretrained(cls) -> "GarSim":
+    def pretrained(cls) -> GarSim:
         """The model shipped inside the package (``garsim/weights``)."""
         from garsim.model.garsim import WEIGHTS_FILE, GarSimModel
 
@@ -225,14 +242,14 @@ class GarSim:
         return cls(model=GarSimModel.load(WEIGHTS_DIR))
 
     @classmethod
-    def load(cls, directory: str | Path) -> "GarSim":
+    def load(cls, directory: str | Path) -> GarSim:
         """A model saved by training (a folder with model.safetensors + config.json)."""
         from garsim.model.garsim import GarSimModel
 
         return cls(model=GarSimModel.load(directory))
 
     @classmethod
-    def default(cls) -> "GarSim":
+    def default(cls) -> GarSim:
         """The shipped model when present, else the prior."""
         try:
             return cls.pretrained()
@@ -246,9 +263,16 @@ class GarSim:
         prior = garment_prior(body, canonical, target, garment.vertices)
         fabric_name, fabric_values = fabric_fields(fabric)
         sample = Sample(
-            body_canonical=canonical.vertices, body_target=target.vertices, body_faces=body.faces,
-            garment=garment.vertices, garment_faces=garment.faces, pinned=garment.pinned, prior=prior,
-            fabric=fabric_name, fabric_values=fabric_values, garment_type=garment.kind,
+            body_canonical=canonical.vertices,
+            body_target=target.vertices,
+            body_faces=body.faces,
+            garment=garment.vertices,
+            garment_faces=garment.faces,
+            pinned=garment.pinned,
+            prior=prior,
+            fabric=fabric_name,
+            fabric_values=fabric_values,
+            garment_type=garment.kind,
         )
         return self.predict(sample)
 

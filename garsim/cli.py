@@ -9,7 +9,6 @@ import os
 import sys
 from pathlib import Path
 
-
 from garsim.atomic import atomic_write_bytes
 from garsim.data.sample import FABRICS
 
@@ -31,8 +30,9 @@ def _write_json(path: str | Path, obj: object) -> Path:
 def cmd_demo(args: argparse.Namespace) -> int:
     from garsim.demo import DemoConfig, run_demo
 
-    outputs = run_demo(DemoConfig(out=Path(args.out), seed=args.seed, target_vertices=args.vertices,
-                                  frames=args.frames))
+    outputs = run_demo(
+        DemoConfig(out=Path(args.out), seed=args.seed, target_vertices=args.vertices, frames=args.frames)
+    )
     for path in outputs:
         print(path)
     return 0
@@ -58,8 +58,9 @@ def cmd_drape(args: argparse.Namespace) -> int:
     sim = GarSim.pretrained() if not args.prior_only else GarSim.prior_only()
     garment = load_mesh(args.garment)
     pinned = np.loadtxt(args.pinned, dtype=np.int64, ndmin=1) if args.pinned else None
-    verts = sim.drape(args.canonical, args.target, garment, fabric=args.fabric, pinned=pinned, up=args.up,
-                      units=args.units)
+    verts = sim.drape(
+        args.canonical, args.target, garment, fabric=args.fabric, pinned=pinned, up=args.up, units=args.units
+    )
     save_mesh(args.out, verts, garment[1], y_up=args.y_up)
     print(args.out)
     if args.png:
@@ -78,8 +79,9 @@ def cmd_animate(args: argparse.Namespace) -> int:
 
     out = Path(args.out)
     if out.suffix.lower() not in SUPPORTED_EXTENSIONS:  # checked before any work
-        raise ValueError(f"cannot write {out.suffix or 'a file without extension'!r}; use one of "
-                         f"{', '.join(SUPPORTED_EXTENSIONS)}")
+        raise ValueError(
+            f"cannot write {out.suffix or 'a file without extension'!r}; use one of {', '.join(SUPPORTED_EXTENSIONS)}"
+        )
     garment = load_mesh(args.garment)
     if args.motion:
         from garsim.bodies.anny import AnnyBody
@@ -91,8 +93,10 @@ def cmd_animate(args: argparse.Namespace) -> int:
         faces = body.faces
     else:
         if not (args.canonical and args.targets):
-            raise ValueError("give --motion NAME (the default Anny body), or --canonical and --targets (a folder of "
-                             "body OBJs or an .npz with an array 'vertices' of shape (T, V, 3))")
+            raise ValueError(
+                "give --motion NAME (the default Anny body), or --canonical and --targets (a folder of "
+                "body OBJs or an .npz with an array 'vertices' of shape (T, V, 3))"
+            )
         canonical = as_mesh(args.canonical, "canonical body")
         faces = canonical[1]
         src = Path(args.targets)
@@ -112,10 +116,22 @@ def cmd_animate(args: argparse.Namespace) -> int:
 def cmd_data_generate(args: argparse.Namespace) -> int:
     from garsim.physics.generate import GenerateConfig, generate
 
-    given = {"num_train": args.train, "num_test": args.test, "num_ood": args.ood, "min_vertices": args.min_vertices,
-             "max_vertices": args.max_vertices, "targets_per_job": args.targets}
-    cfg = GenerateConfig(out=Path(args.out), seed=args.seed, workers=args.workers, shard=args.shard, limit=args.limit,
-                         **{k: v for k, v in given.items() if v is not None})
+    given = {
+        "num_train": args.train,
+        "num_test": args.test,
+        "num_ood": args.ood,
+        "min_vertices": args.min_vertices,
+        "max_vertices": args.max_vertices,
+        "targets_per_job": args.targets,
+    }
+    cfg = GenerateConfig(
+        out=Path(args.out),
+        seed=args.seed,
+        workers=args.workers,
+        shard=args.shard,
+        limit=args.limit,
+        **{k: v for k, v in given.items() if v is not None},
+    )
     summary = generate(cfg, progress=not args.quiet)
     secs = summary.pop("seconds")
     if secs:
@@ -131,13 +147,17 @@ def cmd_data_info(args: argparse.Namespace) -> int:
     if args.json:
         print(json.dumps(info, indent=2))
         return 0
-    print(f"{info['root']}: {info['samples']} samples ({info['settled_samples']} settled) in {info['sequences']} "
-          f"sequences of {info['garment_instances']} garment instances, {info['rejected_sequences']} rejected")
+    print(
+        f"{info['root']}: {info['samples']} samples ({info['settled_samples']} settled) in {info['sequences']} "
+        f"sequences of {info['garment_instances']} garment instances, {info['rejected_sequences']} rejected"
+    )
     for key, n in info["samples_by"].items():
         print(f"  {key:40s} {n:6d} samples")
     for fam, f in info["per_family"].items():
-        print(f"  {fam:12s} acceptance {f['acceptance_rate']:.0%} of {f['jobs']} jobs, "
-              f"{f['cpu_seconds_per_settled_sample']:.1f} CPU s per settled sample")
+        print(
+            f"  {fam:12s} acceptance {f['acceptance_rate']:.0%} of {f['jobs']} jobs, "
+            f"{f['cpu_seconds_per_settled_sample']:.1f} CPU s per settled sample"
+        )
     return 0
 
 
@@ -156,12 +176,17 @@ def cmd_train(args: argparse.Namespace) -> int:
     from garsim.model.garsim import GarSimModel
     from garsim.train.data import train_val_samples
     from garsim.train.losses import LossWeights
-    from garsim.train.trainer import Trainer, TrainConfig
+    from garsim.train.trainer import TrainConfig, Trainer
 
     train, val = train_val_samples(args.data, resolution=args.resolution, val_every=args.val_every)
     init = GarSimModel.load(args.init) if args.init else None
-    given = {"epochs": args.epochs, "batch_size": args.batch_size, "lr": args.lr, "seed": args.seed,
-             "threads": args.threads}
+    given = {
+        "epochs": args.epochs,
+        "batch_size": args.batch_size,
+        "lr": args.lr,
+        "seed": args.seed,
+        "threads": args.threads,
+    }
     losses = {"col": args.collision_weight, "eps": args.collision_eps}
     cfg = TrainConfig(
         out_dir=args.out,
@@ -201,8 +226,10 @@ def cmd_eval(args: argparse.Namespace) -> int:
             "garsim": fabric_awareness(sim.model, args.data, resolution=args.resolution),
             "ground_truth": ground_truth_fabric_distances(args.data, resolution=args.resolution),
         }
-        print("fabric awareness (test skirts, mean garment-to-body distance, mm):",
-              json.dumps(report["fabric_distance_mm"], indent=1))
+        print(
+            "fabric awareness (test skirts, mean garment-to-body distance, mm):",
+            json.dumps(report["fabric_distance_mm"], indent=1),
+        )
     if args.out:
         print(_write_json(args.out, report))
     return 0
@@ -234,19 +261,32 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("-v", "--verbose", action="store_true", help="log at INFO level")
     sub = parser.add_subparsers(dest="command", required=True)
 
-    p = sub.add_parser("demo", help="drape six garment families on two body shapes in everyday poses; write OBJ, "
-                                    "a PNG grid, and a walk animation as GLB, USDC and GIF")
+    p = sub.add_parser(
+        "demo",
+        help="drape six garment families on two body shapes in everyday poses; write OBJ, "
+        "a PNG grid, and a walk animation as GLB, USDC and GIF",
+    )
     p.add_argument("--out", default="demo_out", help="output folder")
     p.add_argument("--seed", type=int, default=0, help="seed of the target poses")
-    p.add_argument("--vertices", type=int, default=800,
-                   help="garment resolution (vertices; the shipped model was trained at ~230 and tested at 800)")
+    p.add_argument(
+        "--vertices",
+        type=int,
+        default=800,
+        help="garment resolution (vertices; the shipped model was trained at ~230 and tested at 800)",
+    )
     p.add_argument("--frames", type=int, default=24, help="frames of the walk animation")
     p.set_defaults(func=cmd_demo)
 
-    p = sub.add_parser("view", help="interactive browser viewer of a drape or animation (needs garsim[view])",
-                       epilog="example: garsim view demo_out/walk_dress.npz  (then open http://127.0.0.1:8080)")
-    p.add_argument("path", help="a .glb/.gltf written by garsim, an .npz with 'frames' and 'faces' (optional "
-                                "'body_frames', 'body_faces', 'prior_frames'), a .pc2, an OBJ, or a folder of OBJs")
+    p = sub.add_parser(
+        "view",
+        help="interactive browser viewer of a drape or animation (needs garsim[view])",
+        epilog="example: garsim view demo_out/walk_dress.npz  (then open http://127.0.0.1:8080)",
+    )
+    p.add_argument(
+        "path",
+        help="a .glb/.gltf written by garsim, an .npz with 'frames' and 'faces' (optional "
+        "'body_frames', 'body_faces', 'prior_frames'), a .pc2, an OBJ, or a folder of OBJs",
+    )
     p.add_argument("--port", type=int, default=8080, help="port (the next free one if taken)")
     p.add_argument("--host", default="127.0.0.1", help="address to listen on (0.0.0.0: every interface)")
     p.set_defaults(func=cmd_view)
@@ -265,10 +305,15 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--prior-only", action="store_true", help="use the skinning prior, not the model")
     p.set_defaults(func=cmd_drape)
 
-    p = sub.add_parser("animate", help="drape a garment over a pose sequence; write GLB, USD, PC2 (+OBJ), MP4 or GIF",
-                       epilog="example: garsim animate --garment skirt.obj --motion walk --out walk.glb")
+    p = sub.add_parser(
+        "animate",
+        help="drape a garment over a pose sequence; write GLB, USD, PC2 (+OBJ), MP4 or GIF",
+        epilog="example: garsim animate --garment skirt.obj --motion walk --out walk.glb",
+    )
     p.add_argument("--garment", required=True, help="garment mesh draped on the canonical body")
-    p.add_argument("--motion", help="a motion of the library on the default Anny body: walk, raise_arms, turn, sit_down")
+    p.add_argument(
+        "--motion", help="a motion of the library on the default Anny body: walk, raise_arms, turn, sit_down"
+    )
     p.add_argument("--frames", type=int, default=30, help="frames of a --motion")
     p.add_argument("--canonical", help="canonical body mesh (with --targets)")
     p.add_argument("--targets", help="folder of target body OBJs (sorted by name) or an .npz with 'vertices' (T, V, 3)")
@@ -287,11 +332,19 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--batch-size", type=int)
     p.add_argument("--lr", type=float)
     p.add_argument("--seed", type=int)
-    p.add_argument("--resolution", choices=("low", "full", "both"), default="low",
-                   help="train on the ~4x decimated meshes (the paper's choice), the full ones, or both")
+    p.add_argument(
+        "--resolution",
+        choices=("low", "full", "both"),
+        default="low",
+        help="train on the ~4x decimated meshes (the paper's choice), the full ones, or both",
+    )
     p.add_argument("--val-every", type=int, default=10, help="hold out every N-th training sequence")
-    p.add_argument("--collision-start", type=int, default=None,
-                   help="epoch that switches the collision loss on (default: when validation plateaus)")
+    p.add_argument(
+        "--collision-start",
+        type=int,
+        default=None,
+        help="epoch that switches the collision loss on (default: when validation plateaus)",
+    )
     p.add_argument("--collision-weight", type=float, help="α_col of Eq. 7 (the paper: 1)")
     p.add_argument("--collision-eps", type=float, help="ε of Eq. 6 in metres (margin kept off the body)")
     p.add_argument("--init", help="start from this trained model folder's weights (fine-tuning)")
@@ -356,5 +409,3 @@ def main(argv: list[str] | None = None) -> int:
 
 if __name__ == "__main__":
     sys.exit(main())
-
-

@@ -51,8 +51,9 @@ def load_sim(log: Callable[[str], Any] = print) -> Any:
         sim = GarSim.pretrained()
     except Exception as exc:  # noqa: BLE001 - weights absent, being rewritten, or incompatible: fall back
         first = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
-        print(f"garsim demo: the shipped model could not be loaded ({first}); using the skinning prior",
-              file=sys.stderr)
+        print(
+            f"garsim demo: the shipped model could not be loaded ({first}); using the skinning prior", file=sys.stderr
+        )
         sim = GarSim.prior_only()
     log(f"drape model: {sim.name}")
     return sim
@@ -62,8 +63,15 @@ def _build_garment(kind: str, construction: str, body: Any, vertices: int) -> An
     if construction == "implicit":
         from garsim.garments.implicit import make_implicit_garment
 
-        return make_implicit_garment(kind, body.canonical().vertices, body.faces, body.skin_indices,
-                                     body.skin_weights, body.bone_labels, target_vertices=vertices)
+        return make_implicit_garment(
+            kind,
+            body.canonical().vertices,
+            body.faces,
+            body.skin_indices,
+            body.skin_weights,
+            body.bone_labels,
+            target_vertices=vertices,
+        )
     from garsim.garments.templates import make_garment
 
     return make_garment(kind, body, target_vertices=vertices)
@@ -110,13 +118,22 @@ def run_demo(config: DemoConfig, log: Callable[[str], Any] = print) -> list[Path
             garments[(name, kind)] = garment
             panels.append([(target.vertices, body.faces), (draped, garment.faces)])
             titles.append(f"{kind} / {fabric} / {name}")
-            log(f"{name:5s} {kind:10s} {fabric:6s} {construction:8s} {len(garment.vertices):5d} v  "
-                f"built {t1 - t0:5.2f} s  draped {1000 * (t2 - t1):6.1f} ms")
+            log(
+                f"{name:5s} {kind:10s} {fabric:6s} {construction:8s} {len(garment.vertices):5d} v  "
+                f"built {t1 - t0:5.2f} s  draped {1000 * (t2 - t1):6.1f} ms"
+            )
     log(f"{len(drape_ms)} drapes: {np.mean(drape_ms):.1f} ms per drape on average ({sim.name})")
 
     t0 = time.perf_counter()
-    grid = render_grid(out / "demo.png", panels, ncols=len(DEMO_GARMENTS), titles=titles, views=("front",),
-                       size=320, suptitle=f"garsim demo ({sim.name}, {config.target_vertices} vertices)")
+    grid = render_grid(
+        out / "demo.png",
+        panels,
+        ncols=len(DEMO_GARMENTS),
+        titles=titles,
+        views=("front",),
+        size=320,
+        suptitle=f"garsim demo ({sim.name}, {config.target_vertices} vertices)",
+    )
     written.append(Path(grid))
     log(f"rendered {len(panels)} panels in {time.perf_counter() - t0:.1f} s")
 
@@ -129,20 +146,31 @@ def run_demo(config: DemoConfig, log: Callable[[str], Any] = print) -> list[Path
     t0 = time.perf_counter()
     frames = sim.drape_sequence(canonical, targets, (garment.vertices, garment.faces), fabric=fabric)
     secs = time.perf_counter() - t0
-    log(f"{motion_name}: {kind} on {body_name} body, {config.frames} frames in {secs:.2f} s "
-        f"({1000 * secs / config.frames:.1f} ms per frame)")
+    log(
+        f"{motion_name}: {kind} on {body_name} body, {config.frames} frames in {secs:.2f} s "
+        f"({1000 * secs / config.frames:.1f} ms per frame)"
+    )
     prior = GarSim.prior_only().drape_sequence(canonical, targets, (garment.vertices, garment.faces), fabric=fabric)
     stem = out / f"{motion_name}_{kind}"
     t0 = time.perf_counter()
     for ext in (".glb", ".usdc", ".gif"):
-        written += export_animation(stem.with_suffix(ext), frames, garment.faces, body_frames=targets,
-                                    body_faces=body.faces, fps=config.fps)
+        written += export_animation(
+            stem.with_suffix(ext), frames, garment.faces, body_frames=targets, body_faces=body.faces, fps=config.fps
+        )
     npz = stem.with_suffix(".npz")
-    np.savez_compressed(npz, frames=frames.astype(np.float32), faces=garment.faces.astype(np.int64),
-                        body_frames=np.asarray(targets, dtype=np.float32), body_faces=body.faces.astype(np.int64),
-                        prior_frames=prior.astype(np.float32), fps=np.float32(config.fps))
+    np.savez_compressed(
+        npz,
+        frames=frames.astype(np.float32),
+        faces=garment.faces.astype(np.int64),
+        body_frames=np.asarray(targets, dtype=np.float32),
+        body_faces=body.faces.astype(np.int64),
+        prior_frames=prior.astype(np.float32),
+        fps=np.float32(config.fps),
+    )
     written.append(npz)
-    log(f"exported the animation (GLB, USDC, GIF, NPZ) in {time.perf_counter() - t0:.1f} s; "
-        f"view it with: garsim view {npz}")
+    log(
+        f"exported the animation (GLB, USDC, GIF, NPZ) in {time.perf_counter() - t0:.1f} s; "
+        f"view it with: garsim view {npz}"
+    )
     log(f"demo done in {time.perf_counter() - t_start:.1f} s")
     return written

@@ -20,19 +20,23 @@ from exact closest-point queries, refreshed after every ``iterations`` sweeps (a
 vertices that moved; rounds repeat until nothing is violated (at most ``MAX_ROUNDS``), and a final exact
 contact projection guarantees the margin (contact wins over stretch where they conflict).
 
-Closest point on the obstacle: the triangles are split (1-to-4, per triangle, until each fits in a
-ball of ``SEARCH_RADIUS``), a KD-tree over the pieces' centroids gives candidates and an exact
-vectorised point-triangle distance (Ericson 5.1.5) picks the closest; the candidate set grows until it
-provably holds the closest triangle (distance <= k-th centroid distance - largest piece radius). The
-inside/outside sign comes from the angle-weighted pseudo-normal of the closest feature (vertex, edge
-or face of the original mesh; Baerentzen & Aanaes 2005), exact for a closed, consistently oriented
-mesh. Per-obstacle work (split, tree, pseudo-normals) is cached by content, so a body reused across
-garments and frames is prepared once (~0.2 s for Anny's 27k triangles).
+Closest point on the obstacle: the triangles are split (1-to-4, per triangle, until each piece fits in
+a ball of ``FINE_RADIUS``); a KD-tree over the pieces' centroids gives candidates (only those within
+reach of the band around the surface) and an exact vectorised point-triangle distance (Ericson 5.1.5)
+picks the closest. The candidate set grows (8, then 32 = ``MAX_CANDIDATES``) until it provably holds the
+closest piece (distance <= k-th centroid distance - piece radius); past 32 the best found is taken. The
+inside/outside sign is the angle-weighted pseudo-normal of the closest feature (vertex, edge or face
+of the original mesh; Baerentzen & Aanaes 2005), exact for a closed, outward-oriented mesh. Points away
+from the surface get a distance lower bound and a sign from their nearest piece (nearest obstacle
+vertex beyond ~5 cm); one that looks inside gets an unlimited exact search. Edge samples are only
+queried where the 1-Lipschitz bound from their endpoints' distances allows a violation, and only
+again when they moved. Per-obstacle work (split, trees, pseudo-normals; ~0.15 s for Anny's 27k
+triangles) is cached by content, so a body reused across garments is prepared once.
 
-Limits: points far from the obstacle (farther than ``margin`` + ``BAND``) are classified with a
-candidate set that is not proven complete; a point deep inside a thin concave fold could be missed
-there. The obstacle should be closed and outward-oriented for the sign to be right. Stretch and
-contact can conflict (a pinned vertex inside the body, a garment too small for the body): contact wins.
+Limits: points farther than ``margin`` + ``BAND`` from the obstacle are classified by one nearby
+piece's (or vertex's) pseudo-normal; a point deep inside a concave fold could be missed there. The
+obstacle should be closed and outward-oriented for the sign to be right. Stretch and contact can
+conflict (a pinned vertex inside the body, a garment too small for the body): contact wins.
 """
 
 from __future__ import annotations
@@ -74,8 +78,9 @@ class _Pieces:
     """A mesh's triangles split (1-to-4) until each piece fits in a ball of ``radius`` around its centroid,
     a KD-tree over the centroids, and the pseudo-normal of every piece feature (corner, edge, interior)."""
 
-    def __init__(self, tri: np.ndarray, vn_corner: np.ndarray, face_n: np.ndarray, face_edge_n: np.ndarray,
-                 radius: float) -> None:
+    def __init__(
+        self, tri: np.ndarray, vn_corner: np.ndarray, face_n: np.ndarray, face_edge_n: np.ndarray, radius: float
+    ) -> None:
         nf = len(tri)
         parent = np.arange(nf)
         bary = np.broadcast_to(np.eye(3), (nf, 3, 3)).copy()  # (P, piece corner, weight of parent vertex)
@@ -463,6 +468,7 @@ def refine(
 
     # exact state of every vertex
     x = x0.copy()
+
     def reach(x):  # how far a vertex distance matters for the edge-sample bound below
         if len(e_mov) == 0:
             return band

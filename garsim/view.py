@@ -185,9 +185,15 @@ def load_gltf(path: str | Path) -> ViewData:
     frames, faces = out["garment"]
     body = out.get("body")
     prior = out.get("prior")
-    return ViewData(frames, faces, body_frames=None if body is None else body[0],
-                    body_faces=None if body is None else body[1], prior_frames=None if prior is None else prior[0],
-                    fps=float(extras.get("fps", 30.0)), name=p.name)
+    return ViewData(
+        frames,
+        faces,
+        body_frames=None if body is None else body[0],
+        body_faces=None if body is None else body[1],
+        prior_frames=None if prior is None else prior[0],
+        fps=float(extras.get("fps", 30.0)),
+        name=p.name,
+    )
 
 
 def load_npz(path: str | Path) -> ViewData:
@@ -195,11 +201,19 @@ def load_npz(path: str | Path) -> ViewData:
     with np.load(p, allow_pickle=False) as z:
         missing = [k for k in ("frames", "faces") if k not in z.files]
         if missing:
-            raise ValueError(f"{p}: needs arrays 'frames' (T, N, 3) and 'faces' (F, 3); missing {missing} "
-                             f"(has {sorted(z.files)})")
+            raise ValueError(
+                f"{p}: needs arrays 'frames' (T, N, 3) and 'faces' (F, 3); missing {missing} (has {sorted(z.files)})"
+            )
         get = {k: z[k] for k in z.files}
-    return ViewData(get["frames"], get["faces"], body_frames=get.get("body_frames"), body_faces=get.get("body_faces"),
-                    prior_frames=get.get("prior_frames"), fps=float(get.get("fps", 30.0)), name=p.name)
+    return ViewData(
+        get["frames"],
+        get["faces"],
+        body_frames=get.get("body_frames"),
+        body_faces=get.get("body_faces"),
+        prior_frames=get.get("prior_frames"),
+        fps=float(get.get("fps", 30.0)),
+        name=p.name,
+    )
 
 
 _FRAME_NUMBER = re.compile(r"[_\-.]?\d+$")
@@ -223,8 +237,10 @@ def load_obj_folder(path: str | Path) -> ViewData:
     for role, entries in roles.items():
         if len(entries) > 1:
             names = ", ".join(stem for stem, _ in entries)
-            raise ValueError(f"{p}: the folder holds several {role} meshes ({names}), not one sequence; "
-                             "view one file, or put one sequence per folder")
+            raise ValueError(
+                f"{p}: the folder holds several {role} meshes ({names}), not one sequence; "
+                "view one file, or put one sequence per folder"
+            )
     if not roles["garment"]:
         raise ValueError(f"{p}: no garment OBJs (only body/prior files)")
 
@@ -235,8 +251,9 @@ def load_obj_folder(path: str | Path) -> ViewData:
         meshes = [load_mesh(q) for q in paths]
         sizes = {len(v) for v, _ in meshes}
         if len(sizes) > 1:
-            raise ValueError(f"{p}: the '{stem}' OBJs differ in vertex count {sorted(sizes)}; a sequence "
-                             "shares one mesh")
+            raise ValueError(
+                f"{p}: the '{stem}' OBJs differ in vertex count {sorted(sizes)}; a sequence shares one mesh"
+            )
         return np.stack([v for v, _ in meshes]), meshes[0][1]
 
     garment = read(roles["garment"])
@@ -247,9 +264,14 @@ def load_obj_folder(path: str | Path) -> ViewData:
         body = (np.repeat(body[0], len(frames), axis=0), body[1])
     if body is not None and len(body[0]) != len(frames):
         raise ValueError(f"{p}: {len(frames)} garment OBJs but {len(body[0])} body OBJs")
-    return ViewData(frames, faces, body_frames=None if body is None else body[0],
-                    body_faces=None if body is None else body[1], prior_frames=None if prior is None else prior[0],
-                    name=p.name)
+    return ViewData(
+        frames,
+        faces,
+        body_frames=None if body is None else body[0],
+        body_faces=None if body is None else body[1],
+        prior_frames=None if prior is None else prior[0],
+        name=p.name,
+    )
 
 
 def load_view_data(path: str | Path) -> ViewData:
@@ -277,8 +299,13 @@ def load_view_data(path: str | Path) -> ViewData:
         body = None
         if body_pc2.exists() and body_pc2.with_suffix(".obj").exists():
             body = (read_pc2(body_pc2)[0], load_mesh(body_pc2.with_suffix(".obj"))[1])
-        return ViewData(frames, faces, body_frames=None if body is None else body[0],
-                        body_faces=None if body is None else body[1], name=p.name)
+        return ViewData(
+            frames,
+            faces,
+            body_frames=None if body is None else body[0],
+            body_faces=None if body is None else body[1],
+            name=p.name,
+        )
     from garsim.geometry.io import load_mesh
 
     v, f = load_mesh(p)
@@ -314,11 +341,23 @@ def colored_glb(vertices: np.ndarray, faces: np.ndarray, rgb: np.ndarray) -> byt
         "scene": 0,
         "scenes": [{"nodes": [0]}],
         "nodes": [{"name": "garment", "mesh": 0}],
-        "meshes": [{"name": "garment", "primitives": [{"attributes": attributes, "indices": indices, "mode": 4,
-                                                        "material": 0}]}],
-        "materials": [{"name": "garment", "doubleSided": True,
-                       "pbrMetallicRoughness": {"baseColorFactor": [1.0, 1.0, 1.0, 1.0], "metallicFactor": 0.0,
-                                                "roughnessFactor": 0.85}}],
+        "meshes": [
+            {
+                "name": "garment",
+                "primitives": [{"attributes": attributes, "indices": indices, "mode": 4, "material": 0}],
+            }
+        ],
+        "materials": [
+            {
+                "name": "garment",
+                "doubleSided": True,
+                "pbrMetallicRoughness": {
+                    "baseColorFactor": [1.0, 1.0, 1.0, 1.0],
+                    "metallicFactor": 0.0,
+                    "roughnessFactor": 0.85,
+                },
+            }
+        ],
         "accessors": b.accessors,
         "bufferViews": b.buffer_views,
         "buffers": [{"byteLength": b.offset}],
@@ -353,8 +392,9 @@ class Viewer:
         scene.add_grid("/ground", width=4.0, height=4.0, position=(float(center[0]), float(center[1]), float(lo[2])))
 
         t = data.num_frames
-        gui.add_markdown(f"**{data.name or 'garsim'}**: {t} frame{'s' * (t != 1)}, "
-                         f"{data.frames.shape[1]} garment vertices")
+        gui.add_markdown(
+            f"**{data.name or 'garsim'}**: {t} frame{'s' * (t != 1)}, {data.frames.shape[1]} garment vertices"
+        )
         self.slider = gui.add_slider("frame", min=0, max=max(t - 1, 1), step=1, initial_value=0, disabled=t < 2)
         self.play = gui.add_checkbox("play", initial_value=False, disabled=t < 2)
         self.fps = gui.add_number("fps", initial_value=float(round(data.fps, 3)), min=1.0, max=120.0, step=1.0)
@@ -369,8 +409,9 @@ class Viewer:
 
         self.body = None
         if data.body_frames is not None:
-            self.body = scene.add_mesh_simple("/body", data.body_frames[0], data.body_faces, color=BODY_RGB,
-                                              side="double")
+            self.body = scene.add_mesh_simple(
+                "/body", data.body_frames[0], data.body_faces, color=BODY_RGB, side="double"
+            )
         self.garment: Any = None
         self._render_garment()
 
@@ -400,9 +441,11 @@ class Viewer:
         self.garment = self.server.scene.add_glb("/garment", glb, visible=bool(self.show_garment.value))
         if self.legend is not None and self.correction is not None:
             c = self.correction[k]
-            self.legend.content = (f"correction at frame {k}: mean {1000 * c.mean():.1f} mm, max "
-                                   f"{1000 * c.max():.1f} mm; colour scale 0 (dark) .. {1000 * self.vmax:.1f} mm "
-                                   "(yellow)")
+            self.legend.content = (
+                f"correction at frame {k}: mean {1000 * c.mean():.1f} mm, max "
+                f"{1000 * c.max():.1f} mm; colour scale 0 (dark) .. {1000 * self.vmax:.1f} mm "
+                "(yellow)"
+            )
 
     def show(self, k: int) -> None:
         """Display frame ``k`` (clamped) with the current toggles."""

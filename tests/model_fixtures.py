@@ -72,7 +72,12 @@ def ring_garment(
 
 
 def make_sample(
-    n_around: int = 24, n_down: int = 8, fabric: str = "cotton", pose_id: int = 1, seed: int = 0, name: str | None = None
+    n_around: int = 24,
+    n_down: int = 8,
+    fabric: str = "cotton",
+    pose_id: int = 1,
+    seed: int = 0,
+    name: str | None = None,
 ) -> Sample:
     """A synthetic Sample with an exact LBS prior and a smooth fabric-dependent ground truth."""
     body = anny_body()

@@ -4,9 +4,8 @@ import trimesh
 
 from garsim import GarSim, MeshError
 from garsim.api import make_sample
-from garsim.bodies.prior import mesh_pair_prior
 from garsim.bodies.poses import PoseSampler
-from garsim.bodies.prior import garment_prior
+from garsim.bodies.prior import garment_prior, mesh_pair_prior
 from garsim.garments.templates import make_garment
 
 
@@ -20,8 +19,9 @@ def scene(anny_body):
 
 def test_prior_only_drape_matches_the_lbs_prior_from_meshes(anny_body, scene):
     c, t, g = scene
-    out = GarSim.prior_only().drape((c.vertices, anny_body.faces), (t.vertices, anny_body.faces),
-                                    (g.vertices, g.faces), fabric="silk")
+    out = GarSim.prior_only().drape(
+        (c.vertices, anny_body.faces), (t.vertices, anny_body.faces), (g.vertices, g.faces), fabric="silk"
+    )
     true = garment_prior(anny_body, c, t, g.vertices)
     assert out.shape == g.vertices.shape
     assert np.linalg.norm(out - true, axis=1).mean() < 1e-3
@@ -33,8 +33,9 @@ def test_trimesh_inputs_and_other_topologies(anny_body, scene):
     moved = sphere.copy()
     moved.apply_translation([0.1, 0.2, 0.3])
     garment = trimesh.Trimesh(np.asarray(sphere.vertices[:100]) * 1.1, [[0, 1, 2]], process=False)
-    out = mesh_pair_prior(np.asarray(garment.vertices), np.asarray(sphere.vertices), np.asarray(moved.vertices),
-                          np.asarray(sphere.faces))
+    out = mesh_pair_prior(
+        np.asarray(garment.vertices), np.asarray(sphere.vertices), np.asarray(moved.vertices), np.asarray(sphere.faces)
+    )
     np.testing.assert_allclose(out, np.asarray(garment.vertices) + [0.1, 0.2, 0.3], atol=1e-5)
     res = GarSim.prior_only().drape(sphere, moved, garment)
     np.testing.assert_allclose(res, out, atol=1e-6)
@@ -115,7 +116,8 @@ def test_a_garment_the_simplifier_rejects_still_gets_a_prediction(anny_body, sce
     monkeypatch.setattr(api, "_coarse_copy", broken)
     fake = _ShiftModel()
     out = GarSim(fake, collision_margin=None, max_vertices=400).drape(
-        (c.vertices, anny_body.faces), (t.vertices, anny_body.faces), (dense.vertices, dense.faces))
+        (c.vertices, anny_body.faces), (t.vertices, anny_body.faces), (dense.vertices, dense.faces)
+    )
     assert fake.sizes[-1] == len(dense.vertices) and out.shape == dense.vertices.shape
 
 
@@ -130,8 +132,13 @@ def test_y_up_centimetre_input_round_trips_to_the_z_up_result(anny_body, scene):
     def blender(v):
         return z_up_to_y_up(np.asarray(v, dtype=np.float64)) * 100.0
 
-    out = sim.drape((blender(c.vertices), anny_body.faces), (blender(t.vertices), anny_body.faces),
-                    (blender(g.vertices), g.faces), up="y", units="cm")
+    out = sim.drape(
+        (blender(c.vertices), anny_body.faces),
+        (blender(t.vertices), anny_body.faces),
+        (blender(g.vertices), g.faces),
+        up="y",
+        units="cm",
+    )
     np.testing.assert_allclose(out, blender(ref), atol=1e-3)  # 0.01 mm in centimetres
 
 

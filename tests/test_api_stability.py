@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from garsim import GarSim
-from garsim.geometry.io import load_mesh, save_mesh
+from garsim.geometry.io import save_mesh
 
 BOUND_MM = 0.5
 
@@ -76,7 +76,9 @@ def test_face_and_vertex_permutations():
     assert _max_mm(out, reference()[perm]) < BOUND_MM  # a vertex permutation permutes the output
 
 
-@pytest.mark.parametrize("degrees, shift", [(37.0, (0.0, 0.0, 0.0)), (180.0, (0.0, 0.0, 0.0)), (0.0, (10.0, -10.0, 0.0))])
+@pytest.mark.parametrize(
+    "degrees, shift", [(37.0, (0.0, 0.0, 0.0)), (180.0, (0.0, 0.0, 0.0)), (0.0, (10.0, -10.0, 0.0))]
+)
 def test_scene_turned_about_the_vertical_or_moved(degrees, shift):
     can, tgt, g = scene()
     a = np.radians(degrees)

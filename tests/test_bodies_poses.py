@@ -256,7 +256,7 @@ def test_walk_cycle_is_periodic_and_counter_phased(body, axes, dominant, checker
     for bone in frames[0]:
         np.testing.assert_allclose(frames[n][bone], frames[0][bone], atol=1e-12)
     shifted = P.walk_pose(np.array([0.3, 0.3 + 2 * math.pi]), axes=axes)
-    for bone, r in shifted.items():
+    for r in shifted.values():
         np.testing.assert_allclose(r[0], r[1], atol=1e-9)
     assert len(P.walk_cycle(n, include_end=False)) == n
     vertices, _ = body.pose_batch(P.batched_matrices(P.stack_poses(frames)))

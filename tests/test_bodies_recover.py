@@ -27,8 +27,9 @@ def test_recovered_prior_matches_the_true_lbs_prior(anny_body, kind):
     for pose in PoseSampler(seed=11).sample(2):
         t = anny_body.pose(pose)
         true = garment_prior(anny_body, c, t, g)
-        rec = recovered_lbs_prior(g, c.vertices, t.vertices, anny_body.skin_indices, anny_body.skin_weights,
-                                  len(anny_body.bone_labels))
+        rec = recovered_lbs_prior(
+            g, c.vertices, t.vertices, anny_body.skin_indices, anny_body.skin_weights, len(anny_body.bone_labels)
+        )
         err = np.linalg.norm(rec - true, axis=1)
         assert err.mean() < 1e-3, err.mean()
         assert np.linalg.norm(true - g, axis=1).mean() > 0.02  # the pose moves the garment

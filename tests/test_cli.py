@@ -36,17 +36,44 @@ def test_drape_prior_only_writes_mesh_and_png(tmp_path):
     for name, m in (("c.obj", body), ("t.obj", moved), ("g.obj", garment)):
         m.export(tmp_path / name)
     out = tmp_path / "out.obj"
-    rc = main(["drape", "--canonical", str(tmp_path / "c.obj"), "--target", str(tmp_path / "t.obj"),
-               "--garment", str(tmp_path / "g.obj"), "--fabric", "silk", "--out", str(out), "--prior-only",
-               "--png", str(tmp_path / "out.png")])
+    rc = main(
+        [
+            "drape",
+            "--canonical",
+            str(tmp_path / "c.obj"),
+            "--target",
+            str(tmp_path / "t.obj"),
+            "--garment",
+            str(tmp_path / "g.obj"),
+            "--fabric",
+            "silk",
+            "--out",
+            str(out),
+            "--prior-only",
+            "--png",
+            str(tmp_path / "out.png"),
+        ]
+    )
     assert rc == 0 and (tmp_path / "out.png").stat().st_size > 1000
     draped = trimesh.load(out, process=False)
     np.testing.assert_allclose(draped.vertices, np.asarray(garment.vertices) + [0, 0, 0.2], atol=1e-5)
 
 
 def test_errors_are_reported_not_raised(tmp_path, capsys):
-    rc = main(["drape", "--canonical", str(tmp_path / "missing.obj"), "--target", "x.obj", "--garment", "y.obj",
-               "--out", str(tmp_path / "o.obj"), "--prior-only"])
+    rc = main(
+        [
+            "drape",
+            "--canonical",
+            str(tmp_path / "missing.obj"),
+            "--target",
+            "x.obj",
+            "--garment",
+            "y.obj",
+            "--out",
+            str(tmp_path / "o.obj"),
+            "--prior-only",
+        ]
+    )
     assert rc == 2 and "no such file" in capsys.readouterr().err
     with pytest.raises(SystemExit):
         build_parser().parse_args(["data", "generate", "--out", "x", "--shard", "3/2"])
@@ -90,8 +117,24 @@ def test_animate_writes_an_animation_matching_single_drapes(tmp_path, anny_body)
     g = make_garment("skirt", anny_body, target_vertices=300)
     path = tmp_path / "skirt.obj"
     save_mesh(path, g.vertices, g.faces)
-    assert main(["animate", "--garment", str(path), "--motion", "raise_arms", "--frames", "4", "--prior-only",
-                 "--quiet", "--out", str(tmp_path / "a.pc2")]) == 0
+    assert (
+        main(
+            [
+                "animate",
+                "--garment",
+                str(path),
+                "--motion",
+                "raise_arms",
+                "--frames",
+                "4",
+                "--prior-only",
+                "--quiet",
+                "--out",
+                str(tmp_path / "a.pc2"),
+            ]
+        )
+        == 0
+    )
     from garsim.export import read_pc2
 
     frames, _, _ = read_pc2(tmp_path / "a.pc2")

@@ -17,8 +17,9 @@ def _store(tmp_path):
         prior = gv[None].repeat(2, 0)
         truth = prior * (1.0 + 0.01 / 1.05)
         lv = GarmentLevel(gv, gf, np.zeros(len(gv), bool), prior, truth.astype(np.float32))
-        rec = SequenceRecord(f"test-{i}", "test", kind, fabric, bv, bv[None].repeat(2, 0), bf, np.array([2, 9]),
-                             {"low": lv, "full": lv})
+        rec = SequenceRecord(
+            f"test-{i}", "test", kind, fabric, bv, bv[None].repeat(2, 0), bf, np.array([2, 9]), {"low": lv, "full": lv}
+        )
         store.append_manifest(store.write_sequence(rec))
     return tmp_path
 

@@ -5,8 +5,10 @@ from garsim.eval.plots import plot_bars, plot_training_curve
 
 def test_training_curve_png(tmp_path):
     log = tmp_path / "log.csv"
-    log.write_text("epoch,step,lr,train_loss,train_l2_mm,val_err_mm,val_prior_mm,collision,seconds\n"
-                   "1,10,0.001,0.5,30,80,100,0,1\n2,20,0.001,0.2,20,60,100,1,1\n")
+    log.write_text(
+        "epoch,step,lr,train_loss,train_l2_mm,val_err_mm,val_prior_mm,collision,seconds\n"
+        "1,10,0.001,0.5,30,80,100,0,1\n2,20,0.001,0.2,20,60,100,1,1\n"
+    )
     png = plot_training_curve(log, tmp_path / "curve.png")
     assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and png.stat().st_size > 5000
     stages = plot_training_curve([log, log], tmp_path / "stages.png")  # a fine-tuning stage after the first

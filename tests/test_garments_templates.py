@@ -126,6 +126,7 @@ def test_skirt_geometry_follows_parameters(bodies):
     assert short.vertices[:, 2].max() == pytest.approx(z_top, abs=1e-4)
     assert short.vertices[:, 2].min() == pytest.approx(z_top - 0.3, abs=1e-4)
     assert long.vertices[:, 2].min() == pytest.approx(z_top - 0.6, abs=1e-4)
+
     # flare: the hem radius grows by ~flare * (hip - hem height) compared with the unflared skirt
     def hem_radius(g):
         hem = g.vertices[g.vertices[:, 2] < g.vertices[:, 2].min() + 1e-4]

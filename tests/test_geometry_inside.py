@@ -14,7 +14,11 @@ from garsim.geometry.mesh import vertex_normals
 def test_icosphere_inside_outside_and_offsets(icosphere):
     v, f = icosphere
     tester = InsideTester(v, f)
-    assert tester.inside(np.array([[0.0, 0.0, 0.0], [3.0, 0.0, 0.0], [0.0, -5.0, 2.0]])).tolist() == [True, False, False]
+    assert tester.inside(np.array([[0.0, 0.0, 0.0], [3.0, 0.0, 0.0], [0.0, -5.0, 2.0]])).tolist() == [
+        True,
+        False,
+        False,
+    ]
     dirs = v / np.linalg.norm(v, axis=1, keepdims=True)
     assert tester.inside(dirs * 0.97).all()  # 3 cm inside the (slightly faceted) unit sphere
     assert not tester.inside(dirs * 1.03).any()
@@ -74,7 +78,10 @@ def test_anny_body_pelvis_inside_front_outside_and_timing(anny_body):
     t0 = time.perf_counter()
     tester.update(body.vertices)
     dt_refit = time.perf_counter() - t0
-    print(f"\ninside test: 10k queries on a {len(body.vertices)}-vertex body in {dt * 1e3:.1f} ms; refit {dt_refit * 1e3:.1f} ms")
+    print(
+        f"\ninside test: 10k queries on a {len(body.vertices)}-vertex body in {dt * 1e3:.1f} ms; "
+        f"refit {dt_refit * 1e3:.1f} ms"
+    )
     assert 0.01 < inside.mean() < 0.3  # a body fills a small part of its bounding box
     # 5 mm off the torso/legs surface (away from the mouth's inner teeth/tongue shell, the eyes and the
     # touching toes, where "outside a shell" is still inside the head or the foot): both tests agree exactly

@@ -149,7 +149,14 @@ def test_validate_mesh_array_errors():
 def test_as_mesh_accepts_trimesh_pairs_paths_and_objects(tmp_path, icosphere):
     v, f = icosphere
     tm = trimesh.Trimesh(v, f, process=False)
-    for obj in (tm, (v, f), [v.astype(np.float64), f.astype(np.int32)], save_mesh(tmp_path / "a.ply", v, f), str(tmp_path / "a.ply"), trimesh.Scene([tm])):
+    for obj in (
+        tm,
+        (v, f),
+        [v.astype(np.float64), f.astype(np.int32)],
+        save_mesh(tmp_path / "a.ply", v, f),
+        str(tmp_path / "a.ply"),
+        trimesh.Scene([tm]),
+    ):
         v2, f2 = as_mesh(obj)
         np.testing.assert_allclose(v2, v, atol=1e-6)
         np.testing.assert_array_equal(f2, f)

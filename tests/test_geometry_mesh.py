@@ -60,7 +60,9 @@ def test_tetrahedron_closed_mesh():
     assert len(face_pairs(TET_F)) == 6  # every edge is shared by two faces
     assert len(boundary_edges(TET_F)) == 0
     s3 = 1 / np.sqrt(3)
-    np.testing.assert_allclose(face_normals(TET_V, TET_F), [[0, 0, -1], [0, -1, 0], [-1, 0, 0], [s3, s3, s3]], atol=1e-12)
+    np.testing.assert_allclose(
+        face_normals(TET_V, TET_F), [[0, 0, -1], [0, -1, 0], [-1, 0, 0], [s3, s3, s3]], atol=1e-12
+    )
     np.testing.assert_allclose(face_areas(TET_V, TET_F), [0.5, 0.5, 0.5, np.sqrt(3) / 2])
     vn = vertex_normals(TET_V, TET_F)
     np.testing.assert_allclose(vn[0], [-s3, -s3, -s3])  # equal-area faces (0,0,-1), (0,-1,0), (-1,0,0)

@@ -72,7 +72,10 @@ def test_per_vertex_scalars_use_the_colormap(tmp_path):
     img = render_image([(v, f)], views=("front",), colors=np.asarray(v[:, 0]), size=160, cmap="viridis")
     mask = _silhouette(img)
     cols = np.flatnonzero(mask.any(axis=0))
-    left, right = img[:, cols[0] : cols[0] + 15][mask[:, cols[0] : cols[0] + 15]], img[:, cols[-1] - 15 : cols[-1]][mask[:, cols[-1] - 15 : cols[-1]]]
+    left, right = (
+        img[:, cols[0] : cols[0] + 15][mask[:, cols[0] : cols[0] + 15]],
+        img[:, cols[-1] - 15 : cols[-1]][mask[:, cols[-1] - 15 : cols[-1]]],
+    )
     # viridis: low = purple (blue > green), high = yellow (red and green > blue)
     assert left[:, 2].mean() > left[:, 1].mean()
     assert right[:, 0].mean() > right[:, 2].mean() and right[:, 1].mean() > right[:, 2].mean()
@@ -91,7 +94,9 @@ def test_render_views_writes_a_png_with_colorbar_and_title(tmp_path):
     assert img.ndim == 3 and img.shape[0] >= 200
     assert (img[..., :3] < WHITE).any(axis=2).mean() > 0.05  # non-blank
     plain = imread(render_views(tmp_path / "plain.png", [box], size=200))
-    scal = imread(render_views(tmp_path / "err.png", [box], colors=np.linspace(0, 5, len(box[0])), colorbar_label="mm", size=200))
+    scal = imread(
+        render_views(tmp_path / "err.png", [box], colors=np.linspace(0, 5, len(box[0])), colorbar_label="mm", size=200)
+    )
     assert scal.shape[1] > plain.shape[1]  # the colour bar widens the figure
     assert sorted(p.name for p in tmp_path.iterdir()) == ["err.png", "out.png", "plain.png"]  # no temp files
 
@@ -99,7 +104,13 @@ def test_render_views_writes_a_png_with_colorbar_and_title(tmp_path):
 def test_render_grid_layout(tmp_path):
     box = _box((0.5, 0.3, 1.0))
     img = render_image([box], size=100)
-    path = render_grid(tmp_path / "grid.png", [img, [box], [box, _box((0.2, 0.2, 0.2), (0, 0, 0.7))]], ncols=2, titles=["a", "b", "c"], size=100)
+    path = render_grid(
+        tmp_path / "grid.png",
+        [img, [box], [box, _box((0.2, 0.2, 0.2), (0, 0, 0.7))]],
+        ncols=2,
+        titles=["a", "b", "c"],
+        size=100,
+    )
     grid = imread(path)
     assert grid.shape[1] == pytest.approx(2 * img.shape[1], abs=2)
     assert grid.shape[0] == pytest.approx(2 * (100 + 24), abs=2)

@@ -36,7 +36,7 @@ def test_batch_of_two_topologies_equals_single(samples):
         pab = m(collate([build_graph(a), build_graph(b)]))
     assert pab.shape == (len(a.garment) + len(b.garment), 3)
     torch.testing.assert_close(pab[: len(a.garment)], pa, atol=1e-6, rtol=0)
-    torch.testing.assert_close(pab[len(a.garment):], pb, atol=1e-6, rtol=0)
+    torch.testing.assert_close(pab[len(a.garment) :], pb, atol=1e-6, rtol=0)
     assert (pa - torch.from_numpy(a.prior)).norm(dim=1).mean() > 1e-3  # a real correction, not the prior
 
 
@@ -45,8 +45,18 @@ def test_permuting_vertices_permutes_output(samples):
     s = samples[0]
     perm = np.random.default_rng(0).permutation(len(s.garment))
     inv = np.argsort(perm)
-    ps = Sample(s.body_canonical, s.body_target, s.body_faces, s.garment[perm], inv[s.garment_faces],
-                s.pinned[perm], s.prior[perm], s.fabric, s.garment_type, s.target[perm])
+    ps = Sample(
+        s.body_canonical,
+        s.body_target,
+        s.body_faces,
+        s.garment[perm],
+        inv[s.garment_faces],
+        s.pinned[perm],
+        s.prior[perm],
+        s.fabric,
+        s.garment_type,
+        s.target[perm],
+    )
     out, out_p = m.predict(s), m.predict(ps)
     np.testing.assert_allclose(out_p, out[perm], atol=2e-6)
 

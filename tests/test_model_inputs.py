@@ -43,9 +43,11 @@ def test_eq2_quantities_match_brute_force(sample):
     # denim on the silk (0) .. leather (1) log scales of bending, density, stretch
     from garsim.garments.fabrics import PRESETS
 
-    expect = [(np.log(getattr(PRESETS["denim"], k)) - np.log(getattr(PRESETS["silk"], k)))
-              / (np.log(getattr(PRESETS["leather"], k)) - np.log(getattr(PRESETS["silk"], k)))
-              for k in ("bending", "density", "stretch")]
+    expect = [
+        (np.log(getattr(PRESETS["denim"], k)) - np.log(getattr(PRESETS["silk"], k)))
+        / (np.log(getattr(PRESETS["leather"], k)) - np.log(getattr(PRESETS["silk"], k)))
+        for k in ("bending", "density", "stretch")
+    ]
     np.testing.assert_allclose(g.fabric.numpy(), np.tile(expect, (len(G), 1)), atol=1e-6)
     assert g.pinned.sum() == 16
     # geometry-encoder neighbourhoods: self first (zero), then mesh neighbours only (edge lengths)
@@ -106,8 +108,12 @@ def test_semantic_vectors(sample):
     occupied_z = np.flatnonzero(grid.sum(axis=(0, 1)) > 0)
     assert occupied_z.min() >= 3 and occupied_z.max() <= 9
     # a single vertex at a grid node lands in that cell with 1 - exp(-1)
-    one = semantic_vector(np.array([[-0.5, -0.25, 0.0], [0.5, 0.25, 1.0], [0.0, 0.0, 0.0]]), np.array([0]), GarSimConfig())
-    assert one.reshape(8, 4, 16)[0, 0, 0] == pytest.approx(1 - np.exp(-1)) and one.sum() == pytest.approx(1 - np.exp(-1))
+    one = semantic_vector(
+        np.array([[-0.5, -0.25, 0.0], [0.5, 0.25, 1.0], [0.0, 0.0, 0.0]]), np.array([0]), GarSimConfig()
+    )
+    assert one.reshape(8, 4, 16)[0, 0, 0] == pytest.approx(1 - np.exp(-1)) and one.sum() == pytest.approx(
+        1 - np.exp(-1)
+    )
 
 
 def test_batch_offsets_indices(sample):
@@ -116,9 +122,9 @@ def test_batch_offsets_indices(sample):
     b = collate([g0, g1])
     n0, f0 = g0.num_nodes, g0.faces.shape[0]
     assert b.num_graphs == 2 and b.num_nodes == n0 + g1.num_nodes
-    assert torch.equal(b.edge_index[:, g0.edge_index.shape[1]:], g1.edge_index + n0)
+    assert torch.equal(b.edge_index[:, g0.edge_index.shape[1] :], g1.edge_index + n0)
     assert torch.equal(b.faces[f0:], g1.faces + n0)
-    assert torch.equal(b.face_pairs[g0.face_pairs.shape[0]:], g1.face_pairs + f0)
+    assert torch.equal(b.face_pairs[g0.face_pairs.shape[0] :], g1.face_pairs + f0)
     assert b.sem.shape == (2, 512) and b.rot.shape == (2, 3, 3)
     assert set(b.col_batch.tolist()) == {0, 1}
     assert b.name == [sample.meta["name"], other.meta["name"]]

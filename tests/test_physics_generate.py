@@ -23,12 +23,17 @@ def test_plan_is_deterministic_and_split_without_leakage(tmp_path):
     assert [len(v) for v in by_split.values()] == [48, 12, 10]
     train = by_split["train"]
     assert {j.family for j in train} == set(FAMILIES)
-    assert {(j.family, j.construction) for j in train} >= {("skirt", "template"), ("skirt", "implicit"),
-                                                           ("longsleeve", "implicit"), ("trousers", "template")}
+    assert {(j.family, j.construction) for j in train} >= {
+        ("skirt", "template"),
+        ("skirt", "implicit"),
+        ("longsleeve", "implicit"),
+        ("trousers", "template"),
+    }
     assert {j.canonical_arm for j in train} >= {0.0, 40.0} and any(0 < j.canonical_arm < 40 for j in train)
     paired = [j for j in train if j.paired]
-    assert len(paired) == 12 and all([f["name"] for f in j.fabrics] == ["silk", "cotton", "denim", "leather"]
-                                      for j in paired)
+    assert len(paired) == 12 and all(
+        [f["name"] for f in j.fabrics] == ["silk", "cotton", "denim", "leather"] for j in paired
+    )
     assert any(j.fabrics[0]["name"] == "custom" for j in train)  # physical values between the presets
     assert all(cfg.min_vertices <= j.vertices <= cfg.max_vertices for j in jobs)
 
@@ -46,15 +51,20 @@ def test_ood_parameters_lie_outside_every_training_range(tmp_path):
     for job in jobs:
         assert job.construction == "template"
         ranges = PARAMS[job.family].RANGES
-        outside = [not (ranges[k][2] <= v <= ranges[k][3]) for k, v in job.garment_params.items()
-                   if ranges[k][:2] != ranges[k][2:]]
+        outside = [
+            not (ranges[k][2] <= v <= ranges[k][3])
+            for k, v in job.garment_params.items()
+            if ranges[k][:2] != ranges[k][2:]
+        ]
         assert all(outside), (job.family, job.garment_params)
         PARAMS[job.family](**job.garment_params)  # still valid parameters
 
 
 def test_growing_a_split_keeps_every_planned_job(tmp_path):
-    base = {j.job_id: j.__dict__ for j in plan_jobs(GenerateConfig(out=tmp_path, seed=1, num_train=50, num_test=8,
-                                                                    num_ood=3))}
+    base = {
+        j.job_id: j.__dict__
+        for j in plan_jobs(GenerateConfig(out=tmp_path, seed=1, num_train=50, num_test=8, num_ood=3))
+    }
     grown = plan_jobs(GenerateConfig(out=tmp_path, seed=1, num_train=90, num_test=13, num_ood=5))
     by_id = {j.job_id: j.__dict__ for j in grown}
     assert all(by_id[k] == v for k, v in base.items())  # nothing renumbered or reseeded
@@ -105,8 +115,15 @@ def test_resume_after_interrupted_run_rejections_and_transient_errors(tmp_path, 
     assert [e["job"] for e in store.entries("errors.jsonl")] == ["train-00003"]
 
     monkeypatch.setenv("GARSIM_TEST_HEALED", "1")
-    monkeypatch.setattr(gen, "simulate_job", lambda job, config: _fake_job(job, config) if job.index != 5
-                        else _fake_job(job.__class__(**{**job.__dict__, "index": 6}), config))
+    monkeypatch.setattr(
+        gen,
+        "simulate_job",
+        lambda job, config: (
+            _fake_job(job, config)
+            if job.index != 5
+            else _fake_job(job.__class__(**{**job.__dict__, "index": 6}), config)
+        ),
+    )
     summary = gen.generate(cfg, progress=False)
     assert summary["pending"] == 3 and summary["errors"] == 0  # 3, 5 and 6 ran again; 2 stays rejected
     assert {e["job"] for e in store.entries()} == {f"train-0000{i}" for i in (0, 1, 3, 4, 5, 6)}
@@ -132,8 +149,10 @@ def test_shards_partition_the_jobs(tmp_path, monkeypatch):
     ran = []
     monkeypatch.setattr(gen, "_run_one", lambda args: ran.append(args[0].index) or {"entries": [], "rejections": []})
     for k in range(3):
-        gen.generate(GenerateConfig(out=tmp_path / str(k), num_train=7, num_test=2, num_ood=1,
-                                    workers=1, shard=(k, 3)), progress=False)
+        gen.generate(
+            GenerateConfig(out=tmp_path / str(k), num_train=7, num_test=2, num_ood=1, workers=1, shard=(k, 3)),
+            progress=False,
+        )
     assert sorted(ran) == list(range(7)) + [40, 41, 46]
 
 
@@ -165,7 +184,9 @@ def test_killing_the_parent_leaves_no_worker(tmp_path):
     deadline = time.time() + 10
     alive = pids
     while alive and time.time() < deadline:
-        alive = [p for p in alive if os.path.exists(f"/proc/{p}") and "Z" not in open(f"/proc/{p}/stat").read().split()[2]]
+        alive = [
+            p for p in alive if os.path.exists(f"/proc/{p}") and "Z" not in open(f"/proc/{p}/stat").read().split()[2]
+        ]
         time.sleep(0.1)
     assert not alive, f"workers {alive} outlived their parent"
 
@@ -173,8 +194,16 @@ def test_killing_the_parent_leaves_no_worker(tmp_path):
 @pytest.mark.slow
 def test_real_jobs_tshirt_and_trousers_pass_the_physics_checks(tmp_path):
     """A coarse t-shirt and a pair of trousers in everyday poses settle and pass every check (one target each)."""
-    cfg = GenerateConfig(out=tmp_path, num_train=6, targets_per_job=1, min_vertices=300, max_vertices=400,
-                         paired_every=1000, physical_share=0.0, workers=1)
+    cfg = GenerateConfig(
+        out=tmp_path,
+        num_train=6,
+        targets_per_job=1,
+        min_vertices=300,
+        max_vertices=400,
+        paired_every=1000,
+        physical_share=0.0,
+        workers=1,
+    )
     jobs = {j.family: j for j in plan_jobs(cfg) if j.construction == "template"}
     for family in ("tshirt", "trousers"):
         job = jobs[family]

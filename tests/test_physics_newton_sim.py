@@ -169,9 +169,12 @@ def test_settle_then_chained_poses_settle_at_each(anny_body, lowres_skirt):
 
     pose_b = {"upperleg01.R": np.array([-0.3, 0.0, 0.0])}
     verts, transforms = body.pose_batch(batched_matrices(stack_poses(interpolate_poses(pose_a, pose_b, 10))))
-    pins_b = np.stack([garment_prior(body, can, PosedBody(v, t), template)[g.pinned] for v, t in zip(verts, transforms)])
-    states, infos = simulate_poses(template, g.faces, g.pinned, [seg_a, verts], body.faces, [pins_a, pins_b],
-                                   ["cotton"], cfg)
+    pins_b = np.stack(
+        [garment_prior(body, can, PosedBody(v, t), template)[g.pinned] for v, t in zip(verts, transforms)]
+    )
+    states, infos = simulate_poses(
+        template, g.faces, g.pinned, [seg_a, verts], body.faces, [pins_a, pins_b], ["cotton"], cfg
+    )
     assert len(states) == 2 and [i["target"] for i in infos] == [0, 1]
     rest = rest_edge_lengths(g.vertices, g.faces)
     for state, info, seg, pins in zip(states, infos, (seg_a, verts), (pins_a, pins_b)):
@@ -203,8 +206,10 @@ def paired_group(body, kind: str, params: dict, target_vertices: int, cfg: SimCo
     pins = np.repeat(template[g.pinned][None], 2, axis=0)
     states, infos = simulate_poses(template, g.faces, g.pinned, [still], body.faces, [pins], PRESET_NAMES, cfg)
     state = states[0]
-    out = {name: (1000 * mean_body_distance(state[c], can.vertices), mean_fold_angle(state[c], g.faces))
-           for c, name in enumerate(PRESET_NAMES)}
+    out = {
+        name: (1000 * mean_body_distance(state[c], can.vertices), mean_fold_angle(state[c], g.faces))
+        for c, name in enumerate(PRESET_NAMES)
+    }
     print(out, infos)
     return out
 
@@ -214,7 +219,9 @@ def test_paired_fabrics_are_ordered_by_stiffness(anny_body):
     m = paired_group(anny_body, "skirt", {"length": 0.5, "flare": 0.6}, 400, SimConfig(max_hold_frames=40))
     angles = [m[n][1] for n in PRESET_NAMES]
     assert all(a > b for a, b in zip(angles, angles[1:])), m
-    assert m["leather"][0] > m["silk"][0] + 1.0, m  # measured 1.9 mm (44.3 / 44.3 / 44.4 / 46.3 mm): real fabrics differ in folds
+    assert m["leather"][0] > m["silk"][0] + 1.0, (
+        m
+    )  # measured 1.9 mm (44.3 / 44.3 / 44.4 / 46.3 mm): real fabrics differ in folds
 
 
 @pytest.mark.slow

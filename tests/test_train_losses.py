@@ -71,7 +71,9 @@ def test_normal_consistency_hand_value():
     assert val == pytest.approx(1 - 1 / math.sqrt(3), rel=1e-6)
     flat = V.clone()
     flat[3, 2] = 0
-    assert normal_consistency_loss(flat, g.faces, g.face_pairs, torch.zeros(4, dtype=torch.long), 1).item() == pytest.approx(0, abs=1e-7)
+    assert normal_consistency_loss(
+        flat, g.faces, g.face_pairs, torch.zeros(4, dtype=torch.long), 1
+    ).item() == pytest.approx(0, abs=1e-7)
 
 
 def test_collision_hinge_hand_value():
@@ -110,6 +112,13 @@ def test_collision_fraction_by_hand():
     body = torch.tensor([[0.0, 0, 0], [1.0, 0, 0], [0.0, 0, 0]])
     normals = torch.tensor([[0.0, 0, 1], [0.0, 0, 1], [0.0, 0, 1]])
     pred = torch.tensor([[0.0, 0, 0.1], [0.0, 0, -0.1], [1.0, 0, -0.01], [1.0, 0, 0.2], [0.0, 0, -0.5]])
-    data = Data(pos=pred, batch=torch.tensor([0, 0, 0, 0, 1]), col_body=body, col_normal=normals,
-                col_batch=torch.tensor([0, 0, 1]), num_nodes=5, num_graphs=2)
+    data = Data(
+        pos=pred,
+        batch=torch.tensor([0, 0, 0, 0, 1]),
+        col_body=body,
+        col_normal=normals,
+        col_batch=torch.tensor([0, 0, 1]),
+        num_nodes=5,
+        num_graphs=2,
+    )
     np.testing.assert_allclose(collision_fraction(pred, data).numpy(), [0.5, 1.0])

@@ -22,7 +22,15 @@ def data():
 
 
 def _cfg(tmp_path, **kw):
-    base = dict(out_dir=str(tmp_path / "run"), epochs=3, batch_size=2, lr=3e-3, warmup_steps=2, progress=False, collision_start_epoch=2)
+    base = dict(
+        out_dir=str(tmp_path / "run"),
+        epochs=3,
+        batch_size=2,
+        lr=3e-3,
+        warmup_steps=2,
+        progress=False,
+        collision_start_epoch=2,
+    )
     base.update(kw)
     return TrainConfig(**base)
 
@@ -78,7 +86,8 @@ for i in range(int(z["count"])):
                           fabric=str(z[f"{i}_fabric"]), garment_type="skirt", target=z[f"{i}_target"],
                           meta={"name": f"s{i}"}))
 cfg = GarSimConfig(latent=32, edge_latent=16, mlp_hidden=32, num_steps=2)
-t = Trainer(cfg, TrainConfig(out_dir=out, epochs=2, batch_size=1, progress=False, warmup_steps=1), samples[:4], samples[4:])
+tc = TrainConfig(out_dir=out, epochs=2, batch_size=1, progress=False, warmup_steps=1)
+t = Trainer(cfg, tc, samples[:4], samples[4:])
 hist = t.fit()
 flat = torch.cat([p.detach().ravel() for p in t.model.parameters()])
 json.dump({"rank": dist.get_rank(), "world": dist.get_world_size(), "sum": float(flat.double().sum()),
@@ -93,8 +102,10 @@ def test_ddp_two_processes(tmp_path, data):
     tr, va = data
     arrays = {"count": np.array(len(tr) + len(va))}
     for i, s in enumerate(list(tr) + list(va)):
-        for k, v in zip(("bc", "bt", "bf", "g", "gf", "pin", "prior", "target"),
-                        (s.body_canonical, s.body_target, s.body_faces, s.garment, s.garment_faces, s.pinned, s.prior, s.target)):
+        for k, v in zip(
+            ("bc", "bt", "bf", "g", "gf", "pin", "prior", "target"),
+            (s.body_canonical, s.body_target, s.body_faces, s.garment, s.garment_faces, s.pinned, s.prior, s.target),
+        ):
             arrays[f"{i}_{k}"] = v
         arrays[f"{i}_fabric"] = np.array(s.fabric)
     np.savez(tmp_path / "data.npz", **arrays)
@@ -102,8 +113,16 @@ def test_ddp_two_processes(tmp_path, data):
     out = tmp_path / "out"
     out.mkdir()
     env = {**os.environ, "OMP_NUM_THREADS": "1"}
-    cmd = [sys.executable, "-m", "torch.distributed.run", "--nproc_per_node=2", "--master_port=29533",
-           str(tmp_path / "ddp.py"), str(tmp_path / "data.npz"), str(out)]
+    cmd = [
+        sys.executable,
+        "-m",
+        "torch.distributed.run",
+        "--nproc_per_node=2",
+        "--master_port=29533",
+        str(tmp_path / "ddp.py"),
+        str(tmp_path / "data.npz"),
+        str(out),
+    ]
     res = subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=600)
     assert res.returncode == 0, res.stderr[-3000:]
     r0, r1 = (json.loads((out / f"rank{r}.json").read_text()) for r in (0, 1))
@@ -135,8 +154,12 @@ def test_a_training_step_mixes_families_canonical_poses_and_fabric_values(tmp_pa
     base = make_samples(4, seed=7)
     mixed = [
         dataclasses.replace(base[0], garment_type="skirt"),
-        dataclasses.replace(base[1], garment_type="tshirt", fabric="custom",
-                            fabric_values=interpolate_fabric("cotton", "denim", 0.4).values()),
+        dataclasses.replace(
+            base[1],
+            garment_type="tshirt",
+            fabric="custom",
+            fabric_values=interpolate_fabric("cotton", "denim", 0.4).values(),
+        ),
         dataclasses.replace(base[2], garment_type="trousers", meta={**base[2].meta, "canonical_pose": "apose"}),
         rest_sample(base[3]),
     ]

@@ -27,8 +27,13 @@ def scene():
     body = np.stack([bv + np.float32([0.0, 0.0, 0.9 + 0.05 * t]) for t in range(T)])
     prior = frames.copy()
     prior[:, :, 0] += np.linspace(0.0, 0.02, len(gv), dtype=np.float32)  # a correction of 0..20 mm
-    return {"frames": frames, "faces": np.asarray(g.faces, np.int64), "body_frames": body,
-            "body_faces": np.asarray(b.faces, np.int64), "prior_frames": prior}
+    return {
+        "frames": frames,
+        "faces": np.asarray(g.faces, np.int64),
+        "body_frames": body,
+        "body_faces": np.asarray(b.faces, np.int64),
+        "prior_frames": prior,
+    }
 
 
 @pytest.fixture
@@ -42,8 +47,14 @@ def npz(tmp_path, scene):
 def glb(tmp_path, scene):
     from garsim.export import export_animation
 
-    return export_animation(tmp_path / "drape.glb", scene["frames"], scene["faces"], body_frames=scene["body_frames"],
-                            body_faces=scene["body_faces"], fps=12)[0]
+    return export_animation(
+        tmp_path / "drape.glb",
+        scene["frames"],
+        scene["faces"],
+        body_frames=scene["body_frames"],
+        body_faces=scene["body_faces"],
+        fps=12,
+    )[0]
 
 
 def _free_port() -> int:

@@ -35,8 +35,9 @@ def test_pretrained_drape_through_the_public_api(anny_body):
     c = anny_body.canonical()
     t = anny_body.pose(PoseSampler(seed=4).sample(1)[0])
     g = make_garment("skirt", anny_body, target_vertices=600)
-    out = GarSim.pretrained().drape((c.vertices, anny_body.faces), (t.vertices, anny_body.faces),
-                                    (g.vertices, g.faces), fabric="denim")
+    out = GarSim.pretrained().drape(
+        (c.vertices, anny_body.faces), (t.vertices, anny_body.faces), (g.vertices, g.faces), fabric="denim"
+    )
     assert out.shape == g.vertices.shape and np.isfinite(out).all()
     # the drape stays on the body: every vertex within 30 cm of the target body
     from garsim.geometry.proximity import nearest_vertices

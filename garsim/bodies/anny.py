@@ -48,7 +48,7 @@ def _is_rotation_matrix(r: torch.Tensor) -> bool:
     return bool(torch.allclose(r @ r.T, eye, atol=1e-5) and abs(float(torch.linalg.det(r)) - 1.0) < 1e-5)
 
 
-def rotation_to_homogeneous(rot: "np.ndarray | torch.Tensor | Sequence[float]") -> torch.Tensor:
+def rotation_to_homogeneous(rot: np.ndarray | torch.Tensor | Sequence[float]) -> torch.Tensor:
     """Axis-angle (3,) / (B, 3), matrix (3, 3) / (B, 3, 3) or (4, 4) / (B, 4, 4) -> (B, 4, 4) float64.
 
     A (3, 3) array is read as one rotation matrix when it is one (orthonormal, det 1), else as

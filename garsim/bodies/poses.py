@@ -77,7 +77,9 @@ class JointLimits:
         for f in fields(self):
             lo, hi = getattr(self, f.name)
             if not (math.isfinite(lo) and math.isfinite(hi) and lo <= hi and max(abs(lo), abs(hi)) <= 180.0):
-                raise ValueError(f"joint limit {f.name}=({lo}, {hi}) must be finite degrees with low <= high, |.| <= 180")
+                raise ValueError(
+                    f"joint limit {f.name}=({lo}, {hi}) must be finite degrees with low <= high, |.| <= 180"
+                )
 
 
 EVERYDAY_LIMITS = JointLimits(
@@ -105,7 +107,14 @@ SIDED_DOFS: tuple[str, ...] = (
 )  # fmt: skip
 """Degrees of freedom sampled independently for the left (``_L``) and right (``_R``) side."""
 
-CENTRAL_DOFS: tuple[str, ...] = ("spine_flexion", "spine_lateral", "spine_twist", "neck_flexion", "neck_lateral", "neck_twist")
+CENTRAL_DOFS: tuple[str, ...] = (
+    "spine_flexion",
+    "spine_lateral",
+    "spine_twist",
+    "neck_flexion",
+    "neck_lateral",
+    "neck_twist",
+)
 
 
 def angle_names() -> tuple[str, ...]:
@@ -408,7 +417,9 @@ def interpolate_poses(
         for bone in bones:
             r = np.asarray(pose.get(bone, np.zeros(3)), dtype=np.float64)
             if r.shape != (3,):
-                raise ValueError(f"bone {bone!r}: interpolate_poses takes axis-angle (3,) rotations, got shape {r.shape}")
+                raise ValueError(
+                    f"bone {bone!r}: interpolate_poses takes axis-angle (3,) rotations, got shape {r.shape}"
+                )
             out.append(r)
         return torch.as_tensor(np.stack(out))
 
@@ -425,7 +436,9 @@ def stack_poses(poses: Sequence[Mapping[str, np.ndarray]]) -> dict[str, np.ndarr
     return {b: np.stack([np.asarray(p.get(b, np.zeros(3)), dtype=np.float64) for p in poses]) for b in bones}
 
 
-def pose_sequence(body: AnnyBody, target_pose: Mapping[str, np.ndarray], num_frames: int) -> tuple[np.ndarray, np.ndarray]:
+def pose_sequence(
+    body: AnnyBody, target_pose: Mapping[str, np.ndarray], num_frames: int
+) -> tuple[np.ndarray, np.ndarray]:
     """Body moving from the T-pose to ``target_pose``: vertices (T, V, 3) and skinning transforms (T, J, 4, 4)."""
     frames = interpolate_poses(body.t_pose(), target_pose, num_frames)
     return body.pose_batch(batched_matrices(stack_poses(frames)))
@@ -487,8 +500,9 @@ def walk_cycle(
 
 
 # -- motion library ------------------------------------------------------------------------------
-def _towards(target: Mapping[str, np.ndarray], num_frames: int, start: Mapping[str, np.ndarray] | None = None,
-             back: bool = True) -> list[dict[str, np.ndarray]]:
+def _towards(
+    target: Mapping[str, np.ndarray], num_frames: int, start: Mapping[str, np.ndarray] | None = None, back: bool = True
+) -> list[dict[str, np.ndarray]]:
     """From ``start`` (default: arms down at the sides) to ``target`` and (``back``) back again."""
     rest = start if start is not None else STANDING
     half = max(2, num_frames // 2 + 1) if back else num_frames
@@ -512,18 +526,42 @@ def motion(name: str, num_frames: int = 30) -> list[dict[str, np.ndarray]]:
     if name == "walk":
         return walk_cycle(num_frames, include_end=False)
     if name == "raise_arms":
-        return _towards(_pose({"shoulder_elevation_L": 20.0, "shoulder_elevation_R": 20.0,
-                                        "shoulder_flexion_L": 30.0, "shoulder_flexion_R": 30.0}), num_frames)
+        return _towards(
+            _pose(
+                {
+                    "shoulder_elevation_L": 20.0,
+                    "shoulder_elevation_R": 20.0,
+                    "shoulder_flexion_L": 30.0,
+                    "shoulder_flexion_R": 30.0,
+                }
+            ),
+            num_frames,
+        )
     if name == "turn":
-        left = _towards(_pose({"shoulder_elevation_L": -70.0, "shoulder_elevation_R": -70.0,
-                                        "spine_twist": 25.0}), num_frames // 2)
-        right = _towards(_pose({"shoulder_elevation_L": -70.0, "shoulder_elevation_R": -70.0,
-                                         "spine_twist": -25.0}), num_frames - len(left))
+        left = _towards(
+            _pose({"shoulder_elevation_L": -70.0, "shoulder_elevation_R": -70.0, "spine_twist": 25.0}), num_frames // 2
+        )
+        right = _towards(
+            _pose({"shoulder_elevation_L": -70.0, "shoulder_elevation_R": -70.0, "spine_twist": -25.0}),
+            num_frames - len(left),
+        )
         return left + right
     if name == "sit_down":
-        return _towards(_pose({"shoulder_elevation_L": -70.0, "shoulder_elevation_R": -70.0,
-                                        "hip_flexion_L": 80.0, "hip_flexion_R": 80.0, "knee_flexion_L": 85.0,
-                                        "knee_flexion_R": 85.0, "spine_flexion": 10.0}), num_frames, back=False)
+        return _towards(
+            _pose(
+                {
+                    "shoulder_elevation_L": -70.0,
+                    "shoulder_elevation_R": -70.0,
+                    "hip_flexion_L": 80.0,
+                    "hip_flexion_R": 80.0,
+                    "knee_flexion_L": 85.0,
+                    "knee_flexion_R": 85.0,
+                    "spine_flexion": 10.0,
+                }
+            ),
+            num_frames,
+            back=False,
+        )
     raise ValueError(f"unknown motion {name!r}; choose one of {MOTIONS}")
 
 

@@ -20,7 +20,6 @@ from garsim.geometry.proximity import soft_anchor
 from garsim.geometry.skinning import apply_transforms
 
 
-
 def vertex_rotations(
     canonical: np.ndarray, target: np.ndarray, faces: np.ndarray, rings: int = 2, subset: np.ndarray | None = None
 ) -> np.ndarray:

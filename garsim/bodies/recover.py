@@ -24,8 +24,9 @@ DEFAULT_DAMPING = 1e-4
 class _RigSystem:
     """The parts of the least-squares fit that depend only on the canonical mesh and the rig."""
 
-    def __init__(self, canonical: np.ndarray, skin_indices: np.ndarray, skin_weights: np.ndarray,
-                 num_bones: int, damping: float) -> None:
+    def __init__(
+        self, canonical: np.ndarray, skin_indices: np.ndarray, skin_weights: np.ndarray, num_bones: int, damping: float
+    ) -> None:
         c = np.asarray(canonical, dtype=np.float64)
         si = np.asarray(skin_indices, dtype=np.int64)
         sw = np.asarray(skin_weights, dtype=np.float64)
@@ -58,13 +59,20 @@ _SYSTEMS = ContentCache(4)  # per canonical mesh + rig
 _FITS = ContentCache(16)  # per canonical/target pair
 
 
-def _rig_key(canonical: np.ndarray, skin_indices: np.ndarray, skin_weights: np.ndarray, num_bones: int,
-             damping: float) -> tuple:
+def _rig_key(
+    canonical: np.ndarray, skin_indices: np.ndarray, skin_weights: np.ndarray, num_bones: int, damping: float
+) -> tuple:
     return (content_key(canonical, skin_indices, skin_weights), num_bones, damping)
 
 
-def _rig_system(key: tuple, canonical: np.ndarray, skin_indices: np.ndarray, skin_weights: np.ndarray,
-                num_bones: int, damping: float) -> _RigSystem:
+def _rig_system(
+    key: tuple,
+    canonical: np.ndarray,
+    skin_indices: np.ndarray,
+    skin_weights: np.ndarray,
+    num_bones: int,
+    damping: float,
+) -> _RigSystem:
     return _SYSTEMS.get(key, lambda: _RigSystem(canonical, skin_indices, skin_weights, num_bones, damping))
 
 

@@ -62,10 +62,18 @@ REST_POSE[2 * 3 + 2] = -0.15  # right hip
 """CLOTH3D's rest pose (the pose of every template OBJ): a T-pose, Z up, legs slightly apart."""
 
 SMPL_FILE_NAMES: dict[str, tuple[str, ...]] = {
-    "female": ("SMPL_FEMALE.pkl", "model_f.pkl", "basicModel_f_lbs_10_207_0_v1.0.0.pkl",
-               "basicmodel_f_lbs_10_207_0_v1.1.0.pkl"),
-    "male": ("SMPL_MALE.pkl", "model_m.pkl", "basicmodel_m_lbs_10_207_0_v1.0.0.pkl",
-             "basicmodel_m_lbs_10_207_0_v1.1.0.pkl"),
+    "female": (
+        "SMPL_FEMALE.pkl",
+        "model_f.pkl",
+        "basicModel_f_lbs_10_207_0_v1.0.0.pkl",
+        "basicmodel_f_lbs_10_207_0_v1.1.0.pkl",
+    ),
+    "male": (
+        "SMPL_MALE.pkl",
+        "model_m.pkl",
+        "basicmodel_m_lbs_10_207_0_v1.0.0.pkl",
+        "basicmodel_m_lbs_10_207_0_v1.1.0.pkl",
+    ),
 }
 """SMPL model file names looked for (in ``model_path`` or ``model_path/smpl``), per gender."""
 
@@ -119,9 +127,7 @@ def read_pc16(path: str | os.PathLike, frames: Iterable[int] | None = None) -> n
         del data
 
 
-def write_pc16(
-    path: str | os.PathLike, frames: np.ndarray, start_frame: float = 0.0, sample_rate: float = 1.0
-) -> Path:
+def write_pc16(path: str | os.PathLike, frames: np.ndarray, start_frame: float = 0.0, sample_rate: float = 1.0) -> Path:
     """Write (T, N, 3) vertex positions as a ``.pc16`` cache (float16 data), atomically."""
     v = np.asarray(frames, dtype=np.float64)
     if v.ndim != 3 or v.shape[2] != 3 or v.shape[0] == 0 or v.shape[1] == 0:
@@ -298,8 +304,9 @@ def _per_frame(arr: Any, rows: int, name: str, where: Path) -> np.ndarray:
     return a
 
 
-def _body(body_model: BodyModelFn, betas: np.ndarray, pose: np.ndarray, trans: np.ndarray, gender: str,
-          what: str) -> tuple[np.ndarray, np.ndarray]:
+def _body(
+    body_model: BodyModelFn, betas: np.ndarray, pose: np.ndarray, trans: np.ndarray, gender: str, what: str
+) -> tuple[np.ndarray, np.ndarray]:
     v, f = body_model(betas, pose, trans, gender)
     v = np.asarray(v, dtype=np.float64)
     if v.ndim != 2 or v.shape[1] != 3 or not np.all(np.isfinite(v)):
@@ -370,8 +377,11 @@ def read_cloth3d_sample(
     n_frames = min(n_cache, poses.shape[1])
     if trans.shape[1] not in (1, poses.shape[1]):
         raise Cloth3DError(f"{info_path}: 'trans' has {trans.shape[1]} frames but 'poses' has {poses.shape[1]}")
-    idx = (np.arange(n_frames) if frames is None
-           else _check_frames(frames, n_frames, f"{folder} ({n_cache} cached frames, {poses.shape[1]} poses)"))
+    idx = (
+        np.arange(n_frames)
+        if frames is None
+        else _check_frames(frames, n_frames, f"{folder} ({n_cache} cached frames, {poses.shape[1]} poses)")
+    )
     targets = read_pc16(cache_path, idx).astype(np.float64)
     nan_frames = idx[~np.all(np.isfinite(targets), axis=(1, 2))]
     if len(nan_frames):

@@ -34,7 +34,9 @@ class Sample:
     garment_type: str
     target: np.ndarray | None = None  # (N, 3) ground truth G-bar
     meta: dict[str, Any] = field(default_factory=dict)
-    fabric_values: dict[str, float] | None = None  # physical values (bending N·m, density kg/m², ...), else the preset's
+    fabric_values: dict[str, float] | None = (
+        None  # physical values (bending N·m, density kg/m², ...), else the preset's
+    )
 
     def __post_init__(self) -> None:
         n = len(self.garment)

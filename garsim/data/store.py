@@ -73,7 +73,9 @@ class SequenceRecord:
     def samples(self, resolution: str = "low") -> list[Sample]:
         """The K model samples of this sequence at one resolution."""
         if resolution not in self.levels:
-            raise ValueError(f"sequence {self.seq_id} has no {resolution!r} resolution (it holds {sorted(self.levels)})")
+            raise ValueError(
+                f"sequence {self.seq_id} has no {resolution!r} resolution (it holds {sorted(self.levels)})"
+            )
         lv = self.levels[resolution]
         return [
             Sample(
@@ -88,8 +90,13 @@ class SequenceRecord:
                 fabric=self.fabric,
                 fabric_values=self.meta.get("fabric_values"),
                 garment_type=self.garment_type,
-                meta={**self.meta, "seq_id": self.seq_id, "frame": int(self.frames[k]), "split": self.split,
-                      "name": f"{self.seq_id}@{int(self.frames[k])}"},
+                meta={
+                    **self.meta,
+                    "seq_id": self.seq_id,
+                    "frame": int(self.frames[k]),
+                    "split": self.split,
+                    "name": f"{self.seq_id}@{int(self.frames[k])}",
+                },
             )
             for k in range(len(self.frames))
         ]
@@ -183,8 +190,9 @@ class DatasetStore:
         except Exception as exc:  # noqa: BLE001 - a bad .npy header raises ValueError, TokenError, SyntaxError, ...
             raise StoreError(f"{path} is truncated or corrupt ({type(exc).__name__}: {_one_line(exc)})") from None
         if faces.ndim != 2 or faces.shape[1] != 3 or faces.dtype.kind not in "iu":
-            raise StoreError(f"{path} is corrupt: body faces must be an (F, 3) integer array, "
-                             f"got {faces.dtype} {faces.shape}")
+            raise StoreError(
+                f"{path} is corrupt: body faces must be an (F, 3) integer array, got {faces.dtype} {faces.shape}"
+            )
         return faces
 
     def read_sequence(self, entry: dict[str, Any]) -> SequenceRecord:
@@ -216,7 +224,9 @@ class DatasetStore:
         except KeyError as exc:
             raise StoreError(f"{path} is corrupt: it lacks the array {exc.args[0]!r}") from None
         except (UnicodeDecodeError, ValueError) as exc:
-            raise StoreError(f"{path} is corrupt: unreadable metadata ({type(exc).__name__}: {_one_line(exc)})") from None
+            raise StoreError(
+                f"{path} is corrupt: unreadable metadata ({type(exc).__name__}: {_one_line(exc)})"
+            ) from None
         return SequenceRecord(
             seq_id=entry["id"],
             split=entry["split"],
@@ -242,8 +252,12 @@ class DatasetStore:
         return [s for rec in self.sequences(split) for s in rec.samples(resolution)]
 
     def export_subset(
-        self, dst: str | os.PathLike, ids: list[str], frames: int | None = None, resolutions: tuple[str, ...] = RESOLUTIONS
-    ) -> "DatasetStore":
+        self,
+        dst: str | os.PathLike,
+        ids: list[str],
+        frames: int | None = None,
+        resolutions: tuple[str, ...] = RESOLUTIONS,
+    ) -> DatasetStore:
         """Copy sequences ``ids`` into a new store, keeping the last ``frames`` frames and the given resolutions
         (e.g. a small committed test fixture)."""
         out = DatasetStore(dst)
@@ -271,8 +285,10 @@ class DatasetStore:
         """What the dataset holds: samples (settled / dynamic) per split, family, construction, fabric, canonical
         pose; paired-fabric groups; acceptance rate and CPU seconds per family; vertex and phenotype ranges."""
         if not (self.root / MANIFEST).exists():
-            raise StoreError(f"{self.root} is not a garsim dataset folder (no {MANIFEST}); "
-                             "make one with `garsim data generate --out DIR`")
+            raise StoreError(
+                f"{self.root} is not a garsim dataset folder (no {MANIFEST}); "
+                "make one with `garsim data generate --out DIR`"
+            )
         entries = self.entries()
         rejected = self.entries(REJECTED)
         samples: Counter[str] = Counter()
@@ -401,6 +417,8 @@ class DatasetStore:
         if seq_dir.is_dir():
             for path in sorted(seq_dir.iterdir()):
                 if path.is_file() and path.resolve() not in listed:
-                    problems.append(f"orphan: {path}: in sequences/ but listed by no line of {MANIFEST} "
-                                    "(left by an interrupted run?)")
+                    problems.append(
+                        f"orphan: {path}: in sequences/ but listed by no line of {MANIFEST} "
+                        "(left by an interrupted run?)"
+                    )
         return list(dict.fromkeys(problems))  # a shared corrupt body-faces file is reported once

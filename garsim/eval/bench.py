@@ -39,12 +39,16 @@ def _timed(fn) -> tuple[Any, float, float]:
     return out, (time.perf_counter() - w0) * 1000.0, (time.process_time() - c0) * 1000.0
 
 
-def drape_once(model, body, canonical, target, garment_vertices, garment_faces, pinned, fabric: str = "cotton", kind: str = "skirt") -> tuple[np.ndarray, dict[str, float]]:
+def drape_once(
+    model, body, canonical, target, garment_vertices, garment_faces, pinned, fabric: str = "cotton", kind: str = "skirt"
+) -> tuple[np.ndarray, dict[str, float]]:
     """One end-to-end prediction; returns the vertices and the CPU ms of prior, graph and forward."""
     c0 = time.process_time()
     prior = garment_prior(body, canonical, target, garment_vertices)
     c1 = time.process_time()
-    sample = Sample(canonical.vertices, target.vertices, body.faces, garment_vertices, garment_faces, pinned, prior, fabric, kind)
+    sample = Sample(
+        canonical.vertices, target.vertices, body.faces, garment_vertices, garment_faces, pinned, prior, fabric, kind
+    )
     graph = build_graph(sample, model.config, loss_inputs=False)
     c2 = time.process_time()
     with torch.inference_mode():
@@ -124,7 +128,10 @@ def bench_inference(
                 _, _, c = _timed(lambda: sim.drape(*mesh_args, fabric=fabric))
                 api_cpu.append(c)
             if pred.shape != gar.vertices.shape or not np.isfinite(pred).all():
-                raise RuntimeError(f"the model returned {pred.shape} (finite: {np.isfinite(pred).all()}) for a {gar.vertices.shape} garment")
+                raise RuntimeError(
+                    f"the model returned {pred.shape} (finite: {np.isfinite(pred).all()}) "
+                    f"for a {gar.vertices.shape} garment"
+                )
             results[n] = {
                 "vertices": int(len(gar.vertices)),
                 "wall_ms": float(np.median(wall)),
@@ -179,9 +186,13 @@ def bench_newton(
             lambda: simulate_poses(template, g.faces, g.pinned, [frames], body.faces, [pin_targets], [fabric])
         )
         info = infos[-1]
-        results[int(n)] = {"vertices": int(len(g.vertices)), "wall_ms": wall, "cpu_ms": cpu,
-                           "frames": int(info["motion_frames"] + info.get("hold_frames", 0)),
-                           "settled": bool(info.get("settled"))}
+        results[int(n)] = {
+            "vertices": int(len(g.vertices)),
+            "wall_ms": wall,
+            "cpu_ms": cpu,
+            "frames": int(info["motion_frames"] + info.get("hold_frames", 0)),
+            "settled": bool(info.get("settled")),
+        }
     return results
 
 
@@ -192,7 +203,8 @@ def format_bench(results: Mapping[int, Mapping[str, float]]) -> str:
         lines.append(
             f"{n:>6} (actual {r['vertices']} v): cpu {r['cpu_ms']:.1f} ms, wall {r['wall_ms']:.1f} ms "
             f"[prior {r['prior_cpu_ms']:.1f}, graph {r['graph_cpu_ms']:.1f}, forward {r['forward_cpu_ms']:.1f}]; "
-            f"same garment, new pose: cpu {r['pose_seq_cpu_ms']:.1f} ms; first call (cold body) {r['first_call_wall_ms']:.0f} ms; "
+            f"same garment, new pose: cpu {r['pose_seq_cpu_ms']:.1f} ms; "
+            f"first call (cold body) {r['first_call_wall_ms']:.0f} ms; "
             f"GarSim.drape on mesh pairs: cpu {r['api_cpu_ms']:.1f} ms"
         )
     return "\n".join(lines)

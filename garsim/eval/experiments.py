@@ -29,12 +29,17 @@ def _predict_all(model: Any, samples: list[Sample], batch: int = 16) -> list[np.
 
 def _pushed(preds: list[np.ndarray], samples: list[Sample], margin: float) -> list[np.ndarray]:
     """The API's collision post-process applied to raw predictions."""
-    return [push_outside(p, s.body_target, vertex_normals(s.body_target, s.body_faces), margin)
-            for p, s in zip(preds, samples)]
+    return [
+        push_outside(p, s.body_target, vertex_normals(s.body_target, s.body_faces), margin)
+        for p, s in zip(preds, samples)
+    ]
 
 
 def evaluate_split(
-    model: Any, data_dir: str | os.PathLike, split: str = "test", resolution: str = "low",
+    model: Any,
+    data_dir: str | os.PathLike,
+    split: str = "test",
+    resolution: str = "low",
     collision_margin: float | None = 0.002,
 ) -> dict[str, dict[str, dict[str, float]]]:
     """Mean metrics per garment type (and 'all') for the model and for the prior baseline.
@@ -68,8 +73,12 @@ def evaluate_split(
 
 
 def fabric_awareness(
-    model: Any, data_dir: str | os.PathLike, split: str = "test", garment_type: str = "skirt",
-    resolution: str = "low", max_samples: int = 200,
+    model: Any,
+    data_dir: str | os.PathLike,
+    split: str = "test",
+    garment_type: str = "skirt",
+    resolution: str = "low",
+    max_samples: int = 200,
 ) -> dict[str, float]:
     """Fig. 7: predict the same test garments in every fabric; mean garment-to-body distance (mm).
 
@@ -89,8 +98,9 @@ def fabric_awareness(
     return out
 
 
-def ground_truth_fabric_distances(data_dir: str | os.PathLike, split: str = "test", garment_type: str = "skirt",
-                                  resolution: str = "low") -> dict[str, float]:
+def ground_truth_fabric_distances(
+    data_dir: str | os.PathLike, split: str = "test", garment_type: str = "skirt", resolution: str = "low"
+) -> dict[str, float]:
     """Mean garment-to-body distance (mm) of the simulated final frames per fabric (the reference)."""
     store = DatasetStore(data_dir)
     dist: dict[str, list[float]] = defaultdict(list)
@@ -103,10 +113,14 @@ def ground_truth_fabric_distances(data_dir: str | os.PathLike, split: str = "tes
 
 def format_table(results: dict[str, dict[str, dict[str, float]]]) -> str:
     """A Markdown table (rows: method x garment type) of the four metrics."""
-    lines = ["| method | garment | frames | Euclidean error (mm) | normal consistency | smoothness | collision (%) |",
-             "|---|---|---|---|---|---|---|"]
+    lines = [
+        "| method | garment | frames | Euclidean error (mm) | normal consistency | smoothness | collision (%) |",
+        "|---|---|---|---|---|---|---|",
+    ]
     for method, per_type in results.items():
         for kind, m in per_type.items():
-            lines.append(f"| {method} | {kind} | {m['frames']} | {m['euclidean_mm']:.2f} | "
-                         f"{m['normal_consistency']:.4f} | {m['smoothness']:.5f} | {m['collision_pct']:.2f} |")
+            lines.append(
+                f"| {method} | {kind} | {m['frames']} | {m['euclidean_mm']:.2f} | "
+                f"{m['normal_consistency']:.4f} | {m['smoothness']:.5f} | {m['collision_pct']:.2f} |"
+            )
     return "\n".join(lines)

@@ -80,8 +80,9 @@ def _closest_point_barycentric(
 
 def barycentric_map(points: np.ndarray, vertices: np.ndarray, faces: np.ndarray) -> BarycentricMap:
     """Each point as a barycentric combination of its closest triangle of the mesh (vertices, faces)."""
-    tris, bary = _closest_point_barycentric(np.asarray(points, np.float64), np.asarray(vertices, np.float64),
-                                            np.asarray(faces, np.int64))
+    tris, bary = _closest_point_barycentric(
+        np.asarray(points, np.float64), np.asarray(vertices, np.float64), np.asarray(faces, np.int64)
+    )
     return BarycentricMap(tris, bary)
 
 

@@ -68,7 +68,7 @@ def _kernels():
         tid = wp.tid()
         p = points[tid]
         q = wp.mesh_query_point_sign_winding_number(mesh, p, 1.0e6, accuracy, threshold)
-        d = float(1.0e6)
+        d = 1.0e6
         if q.result:
             c = wp.mesh_eval_position(mesh, q.face, q.u, q.v)
             d = wp.length(p - c) * q.sign

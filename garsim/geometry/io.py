@@ -109,7 +109,8 @@ def validate_mesh(vertices: Any, faces: Any, name: str = "mesh") -> tuple[np.nda
         raise MeshError(f"{name}: the mesh has no faces (a point cloud?); garsim needs a triangle mesh")
     if f.ndim != 2:
         raise MeshError(
-            f"{name}: faces must be an (F, 3) integer array (mixed polygon sizes are not supported), got shape {f.shape}"
+            f"{name}: faces must be an (F, 3) integer array (mixed polygon sizes are not supported), "
+            f"got shape {f.shape}"
         )
     if f.dtype == object:  # e.g. Python ints in an object array; None or text is not an index
         try:
@@ -362,5 +363,6 @@ def as_mesh(obj: Any, name: str | None = None) -> tuple[np.ndarray, np.ndarray]:
     if hasattr(obj, "vertices") and hasattr(obj, "faces"):
         return _validated(obj.vertices, obj.faces, label)
     raise MeshError(
-        f"cannot read a mesh from a {type(obj).__name__}; pass a file path, a (vertices, faces) pair or a trimesh.Trimesh"
+        f"cannot read a mesh from a {type(obj).__name__}; "
+        "pass a file path, a (vertices, faces) pair or a trimesh.Trimesh"
     )

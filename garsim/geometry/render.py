@@ -85,9 +85,7 @@ def _is_scalars(color: Any, n: int) -> bool:
     return isinstance(color, np.ndarray) and color.ndim == 1 and len(color) == n
 
 
-def _vertex_rgb(
-    color: Any, n: int, index: int, cmap: str, vmin: float | None, vmax: float | None
-) -> np.ndarray:
+def _vertex_rgb(color: Any, n: int, index: int, cmap: str, vmin: float | None, vmax: float | None) -> np.ndarray:
     """(n, 3) float RGB for one mesh from None / a colour spec / (n, 3|4) RGB / (n,) scalars."""
     import matplotlib
     import matplotlib.colors as mcolors
@@ -121,7 +119,9 @@ def _color_list(colors: Any, num_meshes: int) -> list[Any]:
         return [colors] * num_meshes
     if isinstance(colors, np.ndarray):
         if num_meshes != 1:
-            raise ValueError(f"a colour array is ambiguous for {num_meshes} meshes; pass a list with one entry per mesh")
+            raise ValueError(
+                f"a colour array is ambiguous for {num_meshes} meshes; pass a list with one entry per mesh"
+            )
         return [colors]
     colors = list(colors)
     if colors and all(isinstance(c, (int, float, np.number)) for c in colors) and len(colors) in (3, 4):
@@ -148,7 +148,9 @@ def _rasterize(
     det = (b[:, 1] - c[:, 1]) * (a[:, 0] - c[:, 0]) + (c[:, 0] - b[:, 0]) * (a[:, 1] - c[:, 1])
     y_lo = np.maximum(np.ceil(tri[:, :, 1].min(axis=1) - 0.5), 0).astype(np.int64)
     y_hi = np.minimum(np.floor(tri[:, :, 1].max(axis=1) - 0.5), height - 1).astype(np.int64)
-    keep = np.flatnonzero((y_hi >= y_lo) & (np.abs(det) > 1e-12) & (tri[:, :, 0].max(axis=1) >= 0) & (tri[:, :, 0].min(axis=1) <= width))
+    keep = np.flatnonzero(
+        (y_hi >= y_lo) & (np.abs(det) > 1e-12) & (tri[:, :, 0].max(axis=1) >= 0) & (tri[:, :, 0].min(axis=1) <= width)
+    )
     if len(keep) == 0:
         return best_face.reshape(height, width), np.zeros((height, width, 3))
     # (triangle, row) pairs and each row's covered column span
@@ -396,7 +398,14 @@ def render_views(
     if title:
         fig.text(0.5, 1.0 - 0.5 * extra_h / (h + extra_h), title, ha="center", va="center", fontsize=11)
     if rng:
-        cax = fig.add_axes((w / (w + extra_w) + 0.1 * extra_w / (w + extra_w), 0.1, 0.18 * extra_w / (w + extra_w), 0.8 * h / (h + extra_h)))
+        cax = fig.add_axes(
+            (
+                w / (w + extra_w) + 0.1 * extra_w / (w + extra_w),
+                0.1,
+                0.18 * extra_w / (w + extra_w),
+                0.8 * h / (h + extra_h),
+            )
+        )
         sm = ScalarMappable(norm=mcolors.Normalize(*rng), cmap=cmap)
         cb = fig.colorbar(sm, cax=cax)
         if colorbar_label:
@@ -457,7 +466,14 @@ def render_grid(
         ax.set_ylim(cell_h - 0.5, -0.5)
         ax.set_axis_off()
         if titles is not None:
-            fig.text((c + 0.5) / ncols, (y0 + cell_h + title_h / 2) / total_h, titles[i], ha="center", va="center", fontsize=10)
+            fig.text(
+                (c + 0.5) / ncols,
+                (y0 + cell_h + title_h / 2) / total_h,
+                titles[i],
+                ha="center",
+                va="center",
+                fontsize=10,
+            )
     if suptitle:
         fig.text(0.5, 1.0 - 0.5 * top / total_h, suptitle, ha="center", va="center", fontsize=12)
     _atomic_savefig(fig, p, dpi)

@@ -77,7 +77,16 @@ class GarSimConfig:
             raise ValueError("semantic='vertex' needs num_body_vertices (the body topology's vertex count)")
         if len(self.semantic_grid) != 3 or min(self.semantic_grid) < 2:
             raise ValueError(f"semantic_grid must be 3 sizes >= 2, got {self.semantic_grid}")
-        for name in ("knn_garment", "knn_body", "latent", "edge_latent", "mlp_hidden", "geo_hidden", "geo_out", "semantic_dim"):
+        for name in (
+            "knn_garment",
+            "knn_body",
+            "latent",
+            "edge_latent",
+            "mlp_hidden",
+            "geo_hidden",
+            "geo_out",
+            "semantic_dim",
+        ):
             if int(getattr(self, name)) < 1:
                 raise ValueError(f"{name} must be >= 1, got {getattr(self, name)}")
         if self.num_steps < 0:
@@ -98,7 +107,7 @@ class GarSimConfig:
         return d
 
     @classmethod
-    def from_dict(cls, d: dict[str, Any]) -> "GarSimConfig":
+    def from_dict(cls, d: dict[str, Any]) -> GarSimConfig:
         """Inverse of ``to_dict``; unknown keys are an error."""
         check_known_keys(cls, d)
         return cls(**d)
@@ -111,7 +120,7 @@ class GarSimConfig:
         return text
 
     @classmethod
-    def from_json(cls, text_or_path: str | Path) -> "GarSimConfig":
+    def from_json(cls, text_or_path: str | Path) -> GarSimConfig:
         """Read from JSON text or a path to a JSON file."""
         p = Path(text_or_path) if not str(text_or_path).lstrip().startswith("{") else None
         text = p.read_text() if p is not None else str(text_or_path)

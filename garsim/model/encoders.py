@@ -81,7 +81,9 @@ class GarmentAwareEncoder(nn.Module):
         self.scale = float(cfg.pos_scale)
         self.mlp = MLP(cfg.geo_out + num_fabrics + 6, cfg.mlp_hidden, cfg.latent, cfg.mlp_layers, cfg.activation)
 
-    def forward(self, x_gar: torch.Tensor, fabric: torch.Tensor, p: torch.Tensor, p_prior: torch.Tensor) -> torch.Tensor:
+    def forward(
+        self, x_gar: torch.Tensor, fabric: torch.Tensor, p: torch.Tensor, p_prior: torch.Tensor
+    ) -> torch.Tensor:
         return self.mlp(torch.cat([x_gar, fabric, p * self.scale, p_prior * self.scale], dim=-1))
 
 

@@ -150,7 +150,8 @@ class GarSimModel(nn.Module):
         rows, slots = data.anchor_index[0], data.anchor_index[1]
         enc = self.geometry(data.body_rel)
         x_body = enc.new_zeros(data.num_nodes, enc.shape[1]).index_add_(
-            0, rows, enc.index_select(0, slots) * data.anchor_weight[:, None])
+            0, rows, enc.index_select(0, slots) * data.anchor_weight[:, None]
+        )
         single = data.rot.shape[0] == 1
         s = self.semantic(data.sem)
         s = s.expand(batch.shape[0], -1) if single else s[batch]

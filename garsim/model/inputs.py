@@ -75,8 +75,9 @@ def body_frame(body_canonical: np.ndarray, faces: np.ndarray, canonicalize_yaw: 
     an edited body is never served stale data."""
     arr = np.ascontiguousarray(body_canonical, dtype=np.float32)
     f = np.ascontiguousarray(faces, dtype=np.int64)
-    return _BODIES.get(content_key(arr, f) + (bool(canonicalize_yaw),),
-                       lambda: BodyFrame(arr, f.copy(), canonicalize_yaw))
+    return _BODIES.get(
+        content_key(arr, f) + (bool(canonicalize_yaw),), lambda: BodyFrame(arr, f.copy(), canonicalize_yaw)
+    )
 
 
 def body_yaw_frame(body_canonical: np.ndarray) -> np.ndarray:
@@ -155,8 +156,6 @@ def semantic_vector(
     return (1.0 - np.exp(-grid)).astype(np.float32)
 
 
-
-
 def garment_topology(garment: np.ndarray, faces: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray]:
     """(N, k) garment mesh rings (self first) and (2, 2E) receiver-sorted directed edges of a template garment.
 
@@ -214,8 +213,9 @@ assert len(_FABRIC_SCALE) == FABRIC_FEATURES
 def fabric_features(sample: Sample) -> np.ndarray:
     """(FABRIC_FEATURES,) float32: the fabric's physical values on the silk (0) .. leather (1) log scales."""
     fab = sample_fabric(sample)
-    return np.array([(np.log(getattr(fab, k)) - lo) / (hi - lo) for k, (lo, hi) in _FABRIC_SCALE.items()],
-                    dtype=np.float32)
+    return np.array(
+        [(np.log(getattr(fab, k)) - lo) / (hi - lo) for k, (lo, hi) in _FABRIC_SCALE.items()], dtype=np.float32
+    )
 
 
 def build_graph(
@@ -316,7 +316,9 @@ def _vertex_normals_at(vertices: np.ndarray, faces: np.ndarray, sel: np.ndarray)
     sub = faces[touched[faces].any(axis=1)]  # every face incident to a selected vertex, in order
     fn = face_normals(vertices, sub, normalize=False)
     idx = sub.T.ravel()  # the summation order of vertex_normals (corner 0 of all faces, then 1, 2)
-    vn = np.stack([np.bincount(idx, weights=np.tile(fn[:, c], 3), minlength=len(vertices)) for c in range(3)], axis=1)[sel]
+    vn = np.stack([np.bincount(idx, weights=np.tile(fn[:, c], 3), minlength=len(vertices)) for c in range(3)], axis=1)[
+        sel
+    ]
     return (vn / np.maximum(np.linalg.norm(vn, axis=1, keepdims=True), 1e-20)).astype(vertices.dtype)
 
 

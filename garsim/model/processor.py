@@ -57,7 +57,11 @@ class MeanAggregator:
         return self._csr
 
     def __call__(self, edge_values: torch.Tensor) -> torch.Tensor:
-        if (torch.is_grad_enabled() and edge_values.requires_grad) or edge_values.dtype != torch.float32 or edge_values.device.type != "cpu":
+        if (
+            (torch.is_grad_enabled() and edge_values.requires_grad)
+            or edge_values.dtype != torch.float32
+            or edge_values.device.type != "cpu"
+        ):
             # training (cheap backward), other dtypes/devices: plain index_add
             out = edge_values.new_zeros(self.num_nodes, edge_values.shape[1]).index_add_(0, self.receivers, edge_values)
             return out * self.inv_deg.to(out.dtype)[:, None]
@@ -87,7 +91,9 @@ class EdgeUpdate(nn.Module):
             mods.append(nn.LayerNorm(d))
         self.rest = nn.Sequential(*mods)
 
-    def forward(self, edge: torch.Tensor, node: torch.Tensor, senders: torch.Tensor, receivers: torch.Tensor) -> torch.Tensor:
+    def forward(
+        self, edge: torch.Tensor, node: torch.Tensor, senders: torch.Tensor, receivers: torch.Tensor
+    ) -> torch.Tensor:
         # in-place accumulation into the gathered receiver term: every op here is autograd-safe
         # (index_select/add_/addmm_ save no tensor that is later overwritten)
         hid = self.lin_recv(node).index_select(0, receivers)
@@ -112,7 +118,9 @@ class MessagePassingStep(nn.Module):
     def __init__(self, cfg: GarSimConfig):
         super().__init__()
         self.edge_update = EdgeUpdate(cfg)
-        self.node_update = MLP(cfg.latent + cfg.edge_latent, cfg.mlp_hidden, cfg.latent, cfg.mlp_layers, cfg.activation, cfg.layer_norm)
+        self.node_update = MLP(
+            cfg.latent + cfg.edge_latent, cfg.mlp_hidden, cfg.latent, cfg.mlp_layers, cfg.activation, cfg.layer_norm
+        )
         self.mean = cfg.aggregation == "mean"
         self.aggregate = None if self.mean else aggregation_resolver(cfg.aggregation)
         self.residual = cfg.residual
@@ -155,8 +163,11 @@ class Processor(nn.Module):
         self.steps = nn.ModuleList([MessagePassingStep(cfg) for _ in range(n_blocks)])
         self.mean = cfg.aggregation == "mean"
         # FiLM from the fabric's physical values: zero-initialised, so training starts from the plain processor
-        self.film = nn.ModuleList([nn.Linear(FABRIC_FEATURES, 2 * cfg.edge_latent) for _ in range(n_blocks)]) \
-            if cfg.fabric_film else None
+        self.film = (
+            nn.ModuleList([nn.Linear(FABRIC_FEATURES, 2 * cfg.edge_latent) for _ in range(n_blocks)])
+            if cfg.fabric_film
+            else None
+        )
         if self.film is not None:
             for lin in self.film:
                 nn.init.zeros_(lin.weight)

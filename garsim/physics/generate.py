@@ -106,7 +106,9 @@ class GenerateConfig:
         if self.targets_per_job < 1 or self.motion_frames < 2:
             raise ValueError("targets_per_job >= 1 and motion_frames >= 2 required")
         if not (100 <= self.min_vertices <= self.max_vertices <= 30000):
-            raise ValueError(f"need 100 <= min_vertices <= max_vertices <= 30000, got {self.min_vertices}, {self.max_vertices}")
+            raise ValueError(
+                f"need 100 <= min_vertices <= max_vertices <= 30000, got {self.min_vertices}, {self.max_vertices}"
+            )
         if not (0.05 <= self.low_ratio <= 1.0):
             raise ValueError(f"low_ratio must be in [0.05, 1], got {self.low_ratio}")
         if self.workers < 1 or self.paired_every < 1 or not (0.0 <= self.physical_share <= 1.0):
@@ -195,9 +197,14 @@ def plan_jobs(config: GenerateConfig) -> list[JobSpec]:
                 params = sample_garment_params(family, rng, region="ood")
             else:
                 family = FAMILIES[j % len(FAMILIES)]
-                construction = "implicit" if family not in TEMPLATE_FAMILIES else CONSTRUCTIONS[(j // len(FAMILIES)) % 2]
-                params = (sample_garment_params(family, rng) if construction == "template"
-                          else sample_implicit_params(family, rng))
+                construction = (
+                    "implicit" if family not in TEMPLATE_FAMILIES else CONSTRUCTIONS[(j // len(FAMILIES)) % 2]
+                )
+                params = (
+                    sample_garment_params(family, rng)
+                    if construction == "template"
+                    else sample_implicit_params(family, rng)
+                )
             paired = j % config.paired_every == config.paired_every - 1
             hi = config.max_paired_vertices if paired else config.max_vertices
             lo = min(config.min_vertices, hi)
@@ -211,12 +218,23 @@ def plan_jobs(config: GenerateConfig) -> list[JobSpec]:
                 name = PRESET_NAMES[int(rng.integers(len(PRESET_NAMES)))]
                 fabrics = [{"name": name, **PRESETS[name].values()}]
             phenotype = {k: round(float(rng.uniform(a, b)), 4) for k, (a, b) in PHENOTYPE_RANGES.items()}
-            jobs.append(JobSpec(
-                job_id=f"{split}-{i:05d}", index=i, split=split, family=family, construction=construction,
-                garment_params=params, vertices=vertices, fabrics=fabrics, paired=paired, phenotype=phenotype,
-                canonical_arm=_canonical_arm(rng), pose_modes=_pose_modes(family, rng, config.targets_per_job),
-                pose_seed=int(rng.integers(2**31)),
-            ))
+            jobs.append(
+                JobSpec(
+                    job_id=f"{split}-{i:05d}",
+                    index=i,
+                    split=split,
+                    family=family,
+                    construction=construction,
+                    garment_params=params,
+                    vertices=vertices,
+                    fabrics=fabrics,
+                    paired=paired,
+                    phenotype=phenotype,
+                    canonical_arm=_canonical_arm(rng),
+                    pose_modes=_pose_modes(family, rng, config.targets_per_job),
+                    pose_seed=int(rng.integers(2**31)),
+                )
+            )
     return jobs
 
 
@@ -237,9 +255,11 @@ def target_poses(job: JobSpec, body: Any) -> list[dict[str, np.ndarray]]:
     everyday = EVERYDAY_LIMITS
     if job.family in SLEEVED:  # sleeves cut for the canonical arms survive arms within ~-50..+25 deg of it
         lo, hi = everyday.shoulder_elevation
-        everyday = replace(everyday, shoulder_elevation=(max(lo, job.canonical_arm - 50.0), min(hi, job.canonical_arm + 25.0)))
+        everyday = replace(
+            everyday, shoulder_elevation=(max(lo, job.canonical_arm - 50.0), min(hi, job.canonical_arm + 25.0))
+        )
     poses = []
-    for k, mode in enumerate(job.pose_modes):
+    for mode in job.pose_modes:
         seed = int(rng.integers(2**31))
         if mode == "walk":
             phase = float(rng.uniform(0.0, 2.0 * math.pi))
@@ -258,8 +278,16 @@ def build_garment(job: JobSpec, body: Any) -> Any:
     if job.construction == "template":
         g = make_garment(job.family, body, job.garment_params, target_vertices=job.vertices)
     else:
-        g = make_implicit_garment(job.family, body.canonical().vertices, body.faces, body.skin_indices,
-                                  body.skin_weights, body.bone_labels, job.garment_params, target_vertices=job.vertices)
+        g = make_implicit_garment(
+            job.family,
+            body.canonical().vertices,
+            body.faces,
+            body.skin_indices,
+            body.skin_weights,
+            body.bone_labels,
+            job.garment_params,
+            target_vertices=job.vertices,
+        )
     g.params["construction"] = job.construction
     if job.family not in WAIST_FAMILIES:  # hung from the shoulders: pin only their tops
         g.pinned &= g.vertices[:, 2] >= g.vertices[g.pinned, 2].max() - SHOULDER_PIN_BAND
@@ -297,34 +325,53 @@ def simulate_job(job: JobSpec, config: GenerateConfig) -> tuple[list[SequenceRec
         garment = Garment(moved, garment.faces, garment.pinned, garment.kind, garment.params)
     rest = rest_edge_lengths(garment.vertices, garment.faces)
     fabrics = [fabric_from_values({k: v for k, v in f.items() if k != "name"}, f["name"]) for f in job.fabrics]
-    settle_fabric = fabric_from_values(
-        {k: v for k, v in next(f for f in job.fabrics if f["name"] == PAIRED_TEMPLATE_FABRIC).items() if k != "name"},
-        PAIRED_TEMPLATE_FABRIC) if job.paired else fabrics[0]
+    settle_fabric = (
+        fabric_from_values(
+            {
+                k: v
+                for k, v in next(f for f in job.fabrics if f["name"] == PAIRED_TEMPLATE_FABRIC).items()
+                if k != "name"
+            },
+            PAIRED_TEMPLATE_FABRIC,
+        )
+        if job.paired
+        else fabrics[0]
+    )
     template, settle_info = settle(garment, canonical.vertices, body.faces, settle_fabric, sim_cfg)
     try:
         check_result(template, garment.faces, rest, canonical.vertices, body.faces, pinned=garment.pinned)
     except SimulationRejected as exc:
         raise SimulationRejected(exc.reason, "settle: " + exc.detail) from None
     if not settle_info["settled"]:
-        raise SimulationRejected("unsettled", f"template still moving at {settle_info['final_speed']} m/s "
-                                 f"after {settle_info['frames']} frames")
+        raise SimulationRejected(
+            "unsettled",
+            f"template still moving at {settle_info['final_speed']} m/s after {settle_info['frames']} frames",
+        )
 
     poses = target_poses(job, body)
     pins = np.flatnonzero(garment.pinned)
     chain = [arm_pose, *poses]
     body_segs, pin_segs, targets = [], [], []
     for a, b in zip(chain[:-1], chain[1:]):
-        verts, transforms = body.pose_batch(batched_matrices(stack_poses(interpolate_poses(a, b, config.motion_frames + 1))))
+        verts, transforms = body.pose_batch(
+            batched_matrices(stack_poses(interpolate_poses(a, b, config.motion_frames + 1)))
+        )
         body_segs.append(verts)
-        pin_segs.append(np.stack([garment_prior(body, canonical, PosedBody(v, t), template)[pins]
-                                  for v, t in zip(verts, transforms)]))
+        pin_segs.append(
+            np.stack(
+                [garment_prior(body, canonical, PosedBody(v, t), template)[pins] for v, t in zip(verts, transforms)]
+            )
+        )
         targets.append(PosedBody(verts[-1], transforms[-1]))
-    states, infos = simulate_poses(template, garment.faces, garment.pinned, body_segs, body.faces, pin_segs,
-                                   fabrics, sim_cfg)
+    states, infos = simulate_poses(
+        template, garment.faces, garment.pinned, body_segs, body.faces, pin_segs, fabrics, sim_cfg
+    )
 
     priors = [garment_prior(body, canonical, t, template) for t in targets[: len(states)]]
-    low_garment, mapping = decimate(Garment(template, garment.faces, garment.pinned, garment.kind, garment.params),
-                                    ratio=max(config.low_ratio, min(1.0, MIN_LOW_VERTICES / len(template))))
+    low_garment, mapping = decimate(
+        Garment(template, garment.faces, garment.pinned, garment.kind, garment.params),
+        ratio=max(config.low_ratio, min(1.0, MIN_LOW_VERTICES / len(template))),
+    )
     low_priors = [garment_prior(body, canonical, t, low_garment.vertices) for t in targets[: len(states)]]
     seconds = time.perf_counter() - t0
     records, rejections = [], []
@@ -345,39 +392,59 @@ def simulate_job(job: JobSpec, config: GenerateConfig) -> tuple[list[SequenceRec
             reason = (infos[-1]["aborted"], f"target {len(states)}: simulation aborted")
         seq_id = job.copy_id(fabric.name)
         if reason is not None:
-            rejections.append({"id": seq_id, "job": job.job_id, "reason": reason[0], "detail": reason[1],
-                               "accepted": len(accepted)})
+            rejections.append(
+                {"id": seq_id, "job": job.job_id, "reason": reason[0], "detail": reason[1], "accepted": len(accepted)}
+            )
         if not accepted:
             continue
         gt = np.stack([states[k][c] for k in accepted]).astype(np.float32)
         full = GarmentLevel(template, garment.faces, garment.pinned, np.stack([priors[k] for k in accepted]), gt)
         low = GarmentLevel(
-            template=low_garment.vertices, faces=low_garment.faces, pinned=low_garment.pinned,
+            template=low_garment.vertices,
+            faces=low_garment.faces,
+            pinned=low_garment.pinned,
             priors=np.stack([low_priors[k] for k in accepted]),
             targets=np.stack([transfer_barycentric(t, mapping) for t in gt]).astype(np.float32),
         )
         meta = {
-            "index": job.index, "seed": config.seed, "job": job.job_id, "family": job.family,
-            "construction": job.construction, "garment_params": job.garment_params, "phenotype": job.phenotype,
-            "canonical_arm": job.canonical_arm, "canonical_pose": canonical_pose_name(job.canonical_arm),
-            "paired": job.paired, "fabric_name": fabric.name, "fabric_values": fabric.values(),
-            "settled": [True] * len(accepted), "dynamic": [False] * len(accepted),
+            "index": job.index,
+            "seed": config.seed,
+            "job": job.job_id,
+            "family": job.family,
+            "construction": job.construction,
+            "garment_params": job.garment_params,
+            "phenotype": job.phenotype,
+            "canonical_arm": job.canonical_arm,
+            "canonical_pose": canonical_pose_name(job.canonical_arm),
+            "paired": job.paired,
+            "fabric_name": fabric.name,
+            "fabric_values": fabric.values(),
+            "settled": [True] * len(accepted),
+            "dynamic": [False] * len(accepted),
             "final_speed": [infos[k]["final_speed"][c] for k in accepted],
             "pose_modes": [job.pose_modes[k] for k in accepted],
-            "target_poses": [{b: np.asarray(v, dtype=float).round(6).tolist() for b, v in poses[k].items()}
-                             for k in accepted],
+            "target_poses": [
+                {b: np.asarray(v, dtype=float).round(6).tolist() for b, v in poses[k].items()} for k in accepted
+            ],
             "settle": {k: settle_info[k] for k in ("frames", "final_speed", "settled", "seconds")},
             "targets": [{k: v for k, v in infos[t].items() if k != "final_speed"} for t in accepted],
             "seconds": seconds / len(fabrics),
             "cpu_seconds": (time.process_time() - c0) / len(fabrics),
         }
-        records.append(SequenceRecord(
-            seq_id=seq_id, split=job.split, garment_type=job.family,
-            fabric=fabric.name if fabric.name != "custom" else nearest_preset(fabric),
-            body_canonical=canonical.vertices, body_targets=np.stack([targets[k].vertices for k in accepted]),
-            body_faces=body.faces, frames=np.asarray(accepted, dtype=np.int64),
-            levels={"full": full, "low": low}, meta=meta,
-        ))
+        records.append(
+            SequenceRecord(
+                seq_id=seq_id,
+                split=job.split,
+                garment_type=job.family,
+                fabric=fabric.name if fabric.name != "custom" else nearest_preset(fabric),
+                body_canonical=canonical.vertices,
+                body_targets=np.stack([targets[k].vertices for k in accepted]),
+                body_faces=body.faces,
+                frames=np.asarray(accepted, dtype=np.int64),
+                levels={"full": full, "low": low},
+                meta=meta,
+            )
+        )
     return records, rejections
 
 
@@ -398,23 +465,42 @@ def _run_one(args: tuple[JobSpec, GenerateConfig]) -> dict[str, Any]:
         entries = []
         for rec in records:
             entry = store.write_sequence(rec)
-            entry.update(job=job.job_id, construction=job.construction, paired=job.paired,
-                         canonical_pose=rec.meta["canonical_pose"], fabric_name=rec.meta["fabric_name"],
-                         cpu_seconds=round(rec.meta["cpu_seconds"], 2), seconds=round(rec.meta["seconds"], 2),
-                         num_settled=int(sum(rec.meta["settled"])), phenotype=job.phenotype)
+            entry.update(
+                job=job.job_id,
+                construction=job.construction,
+                paired=job.paired,
+                canonical_pose=rec.meta["canonical_pose"],
+                fabric_name=rec.meta["fabric_name"],
+                cpu_seconds=round(rec.meta["cpu_seconds"], 2),
+                seconds=round(rec.meta["seconds"], 2),
+                num_settled=int(sum(rec.meta["settled"])),
+                phenotype=job.phenotype,
+            )
             entries.append(entry)
     except SimulationRejected as exc:
         records, entries = [], []
-        rejections = [{"id": job.copy_id(f["name"]), "job": job.job_id, "reason": exc.reason, "detail": exc.detail,
-                       "accepted": 0} for f in job.fabrics]
+        rejections = [
+            {"id": job.copy_id(f["name"]), "job": job.job_id, "reason": exc.reason, "detail": exc.detail, "accepted": 0}
+            for f in job.fabrics
+        ]
     except Exception as exc:  # transient or a bug: not a permanent rejection, retried on the next run
-        return {"error": {"job": job.job_id, "error": f"{type(exc).__name__}: {exc}",
-                          "traceback": traceback.format_exc(limit=5)}}
+        return {
+            "error": {
+                "job": job.job_id,
+                "error": f"{type(exc).__name__}: {exc}",
+                "traceback": traceback.format_exc(limit=5),
+            }
+        }
     cpu = (time.process_time() - c0) / max(len(job.fabrics), 1)
     for r in rejections:
-        r.update(family=job.family, construction=job.construction, split=job.split, targets=len(job.pose_modes),
-                 cpu_seconds=round(cpu, 2) if r["accepted"] == 0 else 0.0,  # a stored copy carries its own time
-                 seconds=round((time.perf_counter() - t0) / len(job.fabrics), 2))
+        r.update(
+            family=job.family,
+            construction=job.construction,
+            split=job.split,
+            targets=len(job.pose_modes),
+            cpu_seconds=round(cpu, 2) if r["accepted"] == 0 else 0.0,  # a stored copy carries its own time
+            seconds=round((time.perf_counter() - t0) / len(job.fabrics), 2),
+        )
     return {"entries": entries, "rejections": rejections}
 
 
@@ -429,11 +515,15 @@ def check_settings(config: GenerateConfig) -> None:
             raise ValueError(f"{path} is corrupt ({exc}); remove it only if the folder holds no samples") from None
         for key in sorted(set(mine) | set(theirs)):
             if mine.get(key) != theirs.get(key):
-                raise ValueError(f"{config.out} was generated with {key}={theirs.get(key)!r}, this run has "
-                                 f"{key}={mine.get(key)!r}: use the same setting or another --out folder")
+                raise ValueError(
+                    f"{config.out} was generated with {key}={theirs.get(key)!r}, this run has "
+                    f"{key}={mine.get(key)!r}: use the same setting or another --out folder"
+                )
         return
     if (config.out / "manifest.jsonl").exists():
-        raise ValueError(f"{config.out} holds a dataset without {CONFIG_FILE} (an older format): use another --out folder")
+        raise ValueError(
+            f"{config.out} holds a dataset without {CONFIG_FILE} (an older format): use another --out folder"
+        )
     atomic_write_bytes(path, json.dumps(mine, indent=2, sort_keys=True).encode())
 
 
@@ -454,8 +544,14 @@ def generate(config: GenerateConfig, progress: bool = True) -> dict[str, Any]:
     pending.sort(key=lambda j: (rank[j.job_id] / size[j.split], j.index))
     if config.limit is not None:
         pending = pending[: config.limit]
-    summary: dict[str, Any] = {"planned": len(jobs), "pending": len(pending), "stored": 0, "rejected": {},
-                               "errors": 0, "seconds": []}
+    summary: dict[str, Any] = {
+        "planned": len(jobs),
+        "pending": len(pending),
+        "stored": 0,
+        "rejected": {},
+        "errors": 0,
+        "seconds": [],
+    }
     if not pending:
         return summary
     work = [(j, config) for j in pending]
@@ -467,7 +563,9 @@ def generate(config: GenerateConfig, progress: bool = True) -> dict[str, Any]:
             if "error" in result:
                 summary["errors"] += 1
                 store.append_manifest(result["error"], ERRORS)
-                log.error("job %s failed (retried on the next run): %s", result["error"]["job"], result["error"]["error"])
+                log.error(
+                    "job %s failed (retried on the next run): %s", result["error"]["job"], result["error"]["error"]
+                )
                 continue
             for entry in result["entries"]:
                 store.append_manifest(entry)
@@ -506,8 +604,9 @@ def _worker_pool(workers: int) -> Iterator[Any]:
     saved = {k: os.environ.get(k) for k in _THREAD_VARS}
     os.environ.update({k: "1" for k in _THREAD_VARS})
     try:
-        with mp.get_context("spawn").Pool(workers, initializer=_worker_init, initargs=(os.getpid(),),
-                                              maxtasksperchild=10) as pool:
+        with mp.get_context("spawn").Pool(
+            workers, initializer=_worker_init, initargs=(os.getpid(),), maxtasksperchild=10
+        ) as pool:
             yield pool
     finally:
         for k, v in saved.items():

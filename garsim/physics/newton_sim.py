@@ -15,8 +15,8 @@ from __future__ import annotations
 
 import logging
 import time
-from dataclasses import asdict, dataclass
 from collections.abc import Callable, Sequence
+from dataclasses import asdict, dataclass
 from typing import Any
 
 import numpy as np
@@ -57,7 +57,9 @@ class SimConfig:
     max_settle_frames: int = 120
     max_hold_frames: int = 60  # settling cap after each motion, at the target pose
     gravity: float = -9.81
-    soft_contact_gap: float = 0.006  # m: contact detection gap (Anny's ~6 mm triangles: 0.01 gave ~40 contacts per particle, 2x the cost)
+    soft_contact_gap: float = (
+        0.006  # m: contact detection gap (Anny's ~6 mm triangles: 0.01 gave ~40 contacts per particle, 2x the cost)
+    )
     contact_ke: float = 1.0e4  # body-cloth contact stiffness (N/m)
     contact_kd: float = 1.0e-2  # body-cloth contact damping
     flat_rest_angles: bool = True  # fabric cut flat: zero rest dihedral angles
@@ -67,8 +69,10 @@ class SimConfig:
 
     def __post_init__(self) -> None:
         if self.fps <= 0 or self.substeps < 1 or self.iterations < 1:
-            raise ValueError(f"fps > 0, substeps >= 1 and iterations >= 1 required, got {self.fps}, "
-                             f"{self.substeps}, {self.iterations}")
+            raise ValueError(
+                f"fps > 0, substeps >= 1 and iterations >= 1 required, got {self.fps}, "
+                f"{self.substeps}, {self.iterations}"
+            )
         if not (0.0 < self.damping <= 1.0):
             raise ValueError(f"damping is a per-substep velocity factor in (0, 1], got {self.damping}")
         if self.max_settle_frames < 1 or self.min_settle_frames < 0 or self.settle_patience < 1:
@@ -131,7 +135,7 @@ class ClothScene:
         pinned: np.ndarray,
         body_vertices: np.ndarray,
         body_faces: np.ndarray,
-        fabrics: "Sequence[str | Fabric]",
+        fabrics: Sequence[str | Fabric],
         config: SimConfig,
     ) -> None:
         from garsim.geometry.inside import quiet_warp
@@ -296,15 +300,19 @@ def _settle_loop(
         if calm >= config.settle_patience and frames >= config.min_settle_frames:
             break
     settled = aborted is None and calm >= config.settle_patience
-    return cur, {"frames": frames, "final_speed": [round(float(x), 5) for x in speed], "settled": settled,
-                 "aborted": aborted}
+    return cur, {
+        "frames": frames,
+        "final_speed": [round(float(x), 5) for x in speed],
+        "settled": settled,
+        "aborted": aborted,
+    }
 
 
 def settle(
     garment: Garment,
     body_vertices: np.ndarray,
     body_faces: np.ndarray,
-    fabric: "str | Fabric",
+    fabric: str | Fabric,
     config: SimConfig | None = None,
 ) -> tuple[np.ndarray, dict[str, Any]]:
     """Drape ``garment`` on the (static) body under gravity until it comes to rest; pins held.
@@ -333,8 +341,13 @@ def settle(
         config=asdict(config),
     )
     if not info["settled"]:
-        log.info("settle: %s stopped after %d frames at mean speed %s m/s (aborted=%s)",
-                 fabric.name, info["frames"], info["final_speed"], info["aborted"])
+        log.info(
+            "settle: %s stopped after %d frames at mean speed %s m/s (aborted=%s)",
+            fabric.name,
+            info["frames"],
+            info["final_speed"],
+            info["aborted"],
+        )
     return final[0].astype(np.float32), info
 
 
@@ -342,12 +355,12 @@ def simulate_poses(
     template: np.ndarray,
     garment_faces: np.ndarray,
     pinned: np.ndarray,
-    body_segments: "Sequence[np.ndarray]",
+    body_segments: Sequence[np.ndarray],
     body_faces: np.ndarray,
-    pin_segments: "Sequence[np.ndarray]",
-    fabrics: "Sequence[str | Fabric]",
+    pin_segments: Sequence[np.ndarray],
+    fabrics: Sequence[str | Fabric],
     config: SimConfig | None = None,
-    on_state: "Callable[[int, np.ndarray, dict[str, Any]], None] | None" = None,
+    on_state: Callable[[int, np.ndarray, dict[str, Any]], None] | None = None,
 ) -> tuple[list[np.ndarray], list[dict[str, Any]]]:
     """Move the body through a chain of target poses and settle at each; every fabric copy at once.
 
@@ -364,7 +377,9 @@ def simulate_poses(
     pinned = np.asarray(pinned, dtype=bool)
     n_pin = int(pinned.sum())
     if len(body_segments) != len(pin_segments) or not body_segments:
-        raise ValueError(f"need one pin segment per body segment (>= 1), got {len(body_segments)} and {len(pin_segments)}")
+        raise ValueError(
+            f"need one pin segment per body segment (>= 1), got {len(body_segments)} and {len(pin_segments)}"
+        )
     segs = [np.asarray(b, dtype=np.float32) for b in body_segments]
     pins = [np.asarray(p, dtype=np.float32) for p in pin_segments]
     for b, p in zip(segs, pins):
@@ -406,8 +421,12 @@ def simulate_poses(
         info: dict[str, Any] = {"target": k, "motion_frames": len(body) - 1, "aborted": aborted}
         if aborted is None:
             state, hold = _settle_loop(scene, config.max_hold_frames, config, edges, rest)
-            info.update(hold_frames=hold["frames"], final_speed=hold["final_speed"], settled=hold["settled"],
-                        aborted=hold["aborted"])
+            info.update(
+                hold_frames=hold["frames"],
+                final_speed=hold["final_speed"],
+                settled=hold["settled"],
+                aborted=hold["aborted"],
+            )
         info["seconds"] = time.perf_counter() - t1
         infos.append(info)
         if info["aborted"]:
@@ -500,7 +519,9 @@ def check_result(
     worst = float(ratio.max())
     if worst > max_stretch:
         t, e = np.unravel_index(int(np.argmax(ratio)), ratio.shape)
-        reject(REJECT_OVERSTRETCHED, f"edge {int(e)} at frame {int(t)} stretched {worst:.2f}x rest (limit {max_stretch}x)")
+        reject(
+            REJECT_OVERSTRETCHED, f"edge {int(e)} at frame {int(t)} stretched {worst:.2f}x rest (limit {max_stretch}x)"
+        )
     from garsim.geometry.inside import InsideTester
 
     tester = InsideTester(body[0] if body.ndim == 3 else body, body_faces)
@@ -509,5 +530,7 @@ def check_result(
             tester.update(body[t])
         frac = float(np.mean(tester.inside(frames[t])))
         if frac > max_inside:
-            reject(REJECT_PENETRATION, f"{100 * frac:.2f}% of garment vertices inside the body at frame {t} "
-                                       f"(limit {100 * max_inside:.1f}%)")
+            reject(
+                REJECT_PENETRATION,
+                f"{100 * frac:.2f}% of garment vertices inside the body at frame {t} (limit {100 * max_inside:.1f}%)",
+            )

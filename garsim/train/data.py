@@ -17,7 +17,10 @@ def rest_sample(sample: Sample) -> Sample:
     Free supervision (no simulation): a settled template must stay where it is when the body does not
     move, which the prior gets exactly and a network must learn."""
     return dataclasses.replace(
-        sample, body_target=sample.body_canonical, prior=sample.garment, target=sample.garment,
+        sample,
+        body_target=sample.body_canonical,
+        prior=sample.garment,
+        target=sample.garment,
         meta={**sample.meta, "name": f"{sample.meta.get('seq_id', '')}@rest", "rest": True},
     )
 
@@ -39,7 +42,8 @@ def train_val_samples(
     """The store's ``train`` split, with every ``val_every``-th garment instance held out for validation.
 
     Validation holds whole jobs (garment instance, body and poses unseen in training; all fabric copies of
-    a paired group together), so nothing of a validation instance is trained on. ``resolution="both"`` takes every frame at the
+    a paired group together), so nothing of a validation instance is trained on.
+    ``resolution="both"`` takes every frame at the
     low and at the full resolution (one model for any mesh density). ``rest`` adds one rest sample per
     settled training record (``rest_sample``).
     """

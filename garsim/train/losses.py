@@ -40,7 +40,14 @@ def _graph_ids(data: Data) -> tuple[torch.Tensor, int]:
     return b, int(data.num_graphs) if getattr(data, "batch", None) is not None else 1
 
 
-def l2_loss(pred: torch.Tensor, target: torch.Tensor, pinned: torch.Tensor, batch: torch.Tensor, num_graphs: int, beta: float = 0.4) -> torch.Tensor:
+def l2_loss(
+    pred: torch.Tensor,
+    target: torch.Tensor,
+    pinned: torch.Tensor,
+    batch: torch.Tensor,
+    num_graphs: int,
+    beta: float = 0.4,
+) -> torch.Tensor:
     """Eq. 3 per graph: (1−β)·mean ‖·‖ over non-pinned + β·mean ‖·‖ over pinned vertices, (B,)."""
     err = torch.linalg.vector_norm(pred - target, dim=-1)
     pin = pinned.to(err.dtype)
@@ -58,7 +65,12 @@ def laplacian_loss(pred: torch.Tensor, edge_index: torch.Tensor, batch: torch.Te
     ``edge_index`` holds both directions of every mesh edge (senders row 0, receivers row 1).
     """
     nbr_mean = scatter(pred[edge_index[0]], edge_index[1], dim=0, dim_size=pred.shape[0], reduce="mean")
-    has_nbr = scatter(torch.ones_like(edge_index[1], dtype=pred.dtype), edge_index[1], dim=0, dim_size=pred.shape[0], reduce="sum") > 0
+    has_nbr = (
+        scatter(
+            torch.ones_like(edge_index[1], dtype=pred.dtype), edge_index[1], dim=0, dim_size=pred.shape[0], reduce="sum"
+        )
+        > 0
+    )
     lap = torch.where(has_nbr[:, None], pred - nbr_mean, torch.zeros_like(pred))
     return scatter(torch.linalg.vector_norm(lap, dim=-1), batch, dim=0, dim_size=num_graphs, reduce="mean")
 
@@ -69,7 +81,9 @@ def face_normals_t(pred: torch.Tensor, faces: torch.Tensor) -> torch.Tensor:
     return torch.nn.functional.normalize(torch.linalg.cross(v1 - v0, v2 - v0), dim=-1, eps=1e-12)
 
 
-def normal_consistency_loss(pred: torch.Tensor, faces: torch.Tensor, face_pairs: torch.Tensor, batch: torch.Tensor, num_graphs: int) -> torch.Tensor:
+def normal_consistency_loss(
+    pred: torch.Tensor, faces: torch.Tensor, face_pairs: torch.Tensor, batch: torch.Tensor, num_graphs: int
+) -> torch.Tensor:
     """Eq. 5 per graph: mean over adjacent face pairs of 1 − cos(angle between their normals), (B,)."""
     n = face_normals_t(pred, faces)
     nc = 1.0 - (n[face_pairs[:, 0]] * n[face_pairs[:, 1]]).sum(-1)
@@ -77,7 +91,9 @@ def normal_consistency_loss(pred: torch.Tensor, faces: torch.Tensor, face_pairs:
     return scatter(nc, pair_graph, dim=0, dim_size=num_graphs, reduce="mean")
 
 
-def nearest_in_graph(points: np.ndarray, point_graph: np.ndarray, refs: np.ndarray, ref_graph: np.ndarray, num_graphs: int) -> np.ndarray:
+def nearest_in_graph(
+    points: np.ndarray, point_graph: np.ndarray, refs: np.ndarray, ref_graph: np.ndarray, num_graphs: int
+) -> np.ndarray:
     """Index into ``refs`` of the nearest reference point of the same graph, for each point."""
     out = np.zeros(len(points), dtype=np.int64)
     for g in range(num_graphs):  # a loop over graphs, not vertices
@@ -112,8 +128,13 @@ def collision_loss(
 def collision_fraction(pred: torch.Tensor, data: Data) -> torch.Tensor:
     """Per graph, the fraction of predicted vertices behind their nearest target-body vertex's normal (DeePSD), (B,)."""
     batch, num_graphs = _graph_ids(data)
-    idx = nearest_in_graph(pred.detach().cpu().numpy(), batch.cpu().numpy(), data.col_body.cpu().numpy(),
-                           data.col_batch.cpu().numpy(), num_graphs)
+    idx = nearest_in_graph(
+        pred.detach().cpu().numpy(),
+        batch.cpu().numpy(),
+        data.col_body.cpu().numpy(),
+        data.col_batch.cpu().numpy(),
+        num_graphs,
+    )
     idx_t = torch.from_numpy(idx).to(pred.device)
     inside = (((pred - data.col_body[idx_t]) * data.col_normal[idx_t]).sum(-1) < 0).to(pred.dtype)
     return scatter(inside, batch, dim=0, dim_size=num_graphs, reduce="mean")

@@ -34,8 +34,19 @@ from garsim.model.garsim import GarSimModel
 from garsim.model.inputs import GarmentGraph, build_graph, collate
 from garsim.train.losses import LossWeights, collision_fraction, garsim_loss, per_graph_error_mm
 
-CSV_FIELDS = ("epoch", "step", "lr", "train_loss", "train_l2_mm", "val_err_mm", "val_prior_mm", "val_collision_pct",
-              "val_score", "collision", "seconds")
+CSV_FIELDS = (
+    "epoch",
+    "step",
+    "lr",
+    "train_loss",
+    "train_l2_mm",
+    "val_err_mm",
+    "val_prior_mm",
+    "val_collision_pct",
+    "val_score",
+    "collision",
+    "seconds",
+)
 COLLISION_MM_PER_PCT = 2.0
 """Checkpoint selection score = validation error (mm) + this x validation collision % (DeePSD's count):
 one percent of vertices inside the body costs as much as 2 mm of mean error."""
@@ -85,7 +96,13 @@ class TrainConfig:
 class GraphDataset(Dataset):
     """Samples (a list, any sequence such as an on-disk store, or an iterable) -> cached GarmentGraphs."""
 
-    def __init__(self, samples: Sequence[Sample] | Iterable[Sample], config: GarSimConfig, with_collision: bool = True, cache: bool = True):
+    def __init__(
+        self,
+        samples: Sequence[Sample] | Iterable[Sample],
+        config: GarSimConfig,
+        with_collision: bool = True,
+        cache: bool = True,
+    ):
         if not (hasattr(samples, "__len__") and hasattr(samples, "__getitem__")):
             samples = list(samples)
         if len(samples) == 0:
@@ -105,7 +122,9 @@ class GraphDataset(Dataset):
             s = self.samples[i]
             if s.target is None:
                 raise ValueError(f"sample {i} ({s.meta.get('name', '')}) has no target: training needs ground truth")
-            g = build_graph(s, self.config, with_collision=self.with_collision, name=str(s.meta.get("name") or f"sample{i}"))
+            g = build_graph(
+                s, self.config, with_collision=self.with_collision, name=str(s.meta.get("name") or f"sample{i}")
+            )
             if self.cache:
                 self._graphs[i] = g
         return g
@@ -160,7 +179,9 @@ class Trainer:
         self.net: torch.nn.Module = self.model
         if self.world > 1:
             self.net = torch.nn.parallel.DistributedDataParallel(self.model)
-        self.optimizer = torch.optim.AdamW(self.model.parameters(), lr=train_config.lr, weight_decay=train_config.weight_decay)
+        self.optimizer = torch.optim.AdamW(
+            self.model.parameters(), lr=train_config.lr, weight_decay=train_config.weight_decay
+        )
         self.out = Path(train_config.out_dir)
         self.epoch = 0
         self.step = 0
@@ -193,11 +214,15 @@ class Trainer:
     # -- loops ------------------------------------------------------------------------------
     def _loader(self, epoch: int) -> DataLoader:
         if self.world > 1:
-            sampler = DistributedSampler(self.train_set, num_replicas=self.world, rank=self.rank, shuffle=True, seed=self.cfg.seed)
+            sampler = DistributedSampler(
+                self.train_set, num_replicas=self.world, rank=self.rank, shuffle=True, seed=self.cfg.seed
+            )
             sampler.set_epoch(epoch)
             return DataLoader(self.train_set, batch_size=self.cfg.batch_size, sampler=sampler, collate_fn=collate)
         gen = torch.Generator().manual_seed(self.cfg.seed * 1000003 + epoch)
-        return DataLoader(self.train_set, batch_size=self.cfg.batch_size, shuffle=True, generator=gen, collate_fn=collate)
+        return DataLoader(
+            self.train_set, batch_size=self.cfg.batch_size, shuffle=True, generator=gen, collate_fn=collate
+        )
 
     def _check_finite(self, terms: dict[str, torch.Tensor], batch) -> None:
         bad = ~torch.isfinite(terms["total"].detach())
@@ -274,8 +299,12 @@ class Trainer:
             dist.all_reduce(sums)
         n = max(sums[3].item(), 1.0)
         err, col = sums[0].item() / n, sums[2].item() / n
-        return {"val_err_mm": err, "val_prior_mm": sums[1].item() / n, "val_collision_pct": col,
-                "val_score": err + COLLISION_MM_PER_PCT * col}
+        return {
+            "val_err_mm": err,
+            "val_prior_mm": sums[1].item() / n,
+            "val_collision_pct": col,
+            "val_score": err + COLLISION_MM_PER_PCT * col,
+        }
 
     def _update_collision_switch(self) -> None:
         if self.collision_on:
@@ -368,7 +397,9 @@ class Trainer:
         state = json.loads((d / "trainer_state.json").read_text())
         loaded = GarSimModel.load(d)
         if loaded.config != self.model_config:
-            raise ValueError(f"checkpoint {d} was trained with another model config; use a new out_dir or the same config")
+            raise ValueError(
+                f"checkpoint {d} was trained with another model config; use a new out_dir or the same config"
+            )
         self.model.load_state_dict(loaded.state_dict())
         tensors = load_file(str(d / "optimizer.safetensors"))
         opt_state: dict[int, dict[str, Any]] = {}

@@ -71,7 +71,9 @@ def _consistent_winding(faces: np.ndarray) -> np.ndarray:
     a, b = fid[pair], fid[pair + 1]
     same = forward[pair] == forward[pair + 1]  # same direction: one of the two faces must flip
     w = np.where(same, 2, 1)
-    g = sp.coo_matrix((np.concatenate([w, w]), (np.concatenate([a, b]), np.concatenate([b, a]))), shape=(nf, nf)).tocsr()
+    g = sp.coo_matrix(
+        (np.concatenate([w, w]), (np.concatenate([a, b]), np.concatenate([b, a]))), shape=(nf, nf)
+    ).tocsr()
     ncomp, labels = connected_components(g, directed=False)
     flip = np.zeros(nf, dtype=bool)
     for c in range(ncomp):
@@ -137,9 +139,7 @@ def _as_template_body(body: Any) -> TemplateBody:
     raise TypeError(f"body must be a TemplateBody or an AnnyBody, got {type(body).__name__}")
 
 
-def make_garment(
-    kind: str, body: Any, params: dict[str, float] | None = None, target_vertices: int = 2500
-) -> Garment:
+def make_garment(kind: str, body: Any, params: dict[str, float] | None = None, target_vertices: int = 2500) -> Garment:
     """Build a ``kind`` template fitted to ``body`` (AnnyBody or TemplateBody) with ~``target_vertices`` vertices."""
     p = garment_params(kind, params)
     if not isinstance(target_vertices, (int, np.integer)) or not (
@@ -185,8 +185,25 @@ def make_garment_from_arrays(
 
 
 __all__ = [
-    "MAX_TARGET_VERTICES", "MIN_TARGET_VERTICES", "OOD_REACH", "PARAMS", "PART_ARM_L", "PART_ARM_R", "PART_HEAD",
-    "PART_LEG_L", "PART_LEG_R", "PART_TORSO", "DressParams", "SkirtParams", "TShirtParams", "TemplateBody",
-    "TopParams", "TrousersParams", "body_parts", "garment_params", "make_garment", "make_garment_from_arrays",
+    "MAX_TARGET_VERTICES",
+    "MIN_TARGET_VERTICES",
+    "OOD_REACH",
+    "PARAMS",
+    "PART_ARM_L",
+    "PART_ARM_R",
+    "PART_HEAD",
+    "PART_LEG_L",
+    "PART_LEG_R",
+    "PART_TORSO",
+    "DressParams",
+    "SkirtParams",
+    "TShirtParams",
+    "TemplateBody",
+    "TopParams",
+    "TrousersParams",
+    "body_parts",
+    "garment_params",
+    "make_garment",
+    "make_garment_from_arrays",
     "sample_garment_params",
 ]

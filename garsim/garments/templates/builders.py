@@ -68,7 +68,9 @@ def _build_skirt(body: TemplateBody, p: SkirtParams, h: float) -> tuple[_Mesh, n
     n = max(8, int(round(circ / h)))
     n += n % 2
     mask = (body.parts == PART_TORSO) | (body.parts == PART_LEG_L) | (body.parts == PART_LEG_R)
-    rings = _tube(body, mesh, zs, _uniform_angles(n), mask, h, _SkirtRadius(body.z_hip, p.looseness, p.flare, body.z_hip))
+    rings = _tube(
+        body, mesh, zs, _uniform_angles(n), mask, h, _SkirtRadius(body.z_hip, p.looseness, p.flare, body.z_hip)
+    )
     pinned = np.zeros(mesh.n, dtype=bool)
     pinned[rings[0]] = True
     return mesh, pinned
@@ -190,8 +192,7 @@ def _build_top(body: TemplateBody, p: TopParams, h: float) -> tuple[_Mesh, np.nd
     mesh = _Mesh()
     xs = 0.5 * (body.neck_halfwidth + body.shoulder_x)
     x_in, x_out = xs - p.strap_width / 2, xs + p.strap_width / 2
-    rings, _, _ = _strapped_torso(body, mesh, h, z_top, z_bot, x_in, x_out, _BodyRadius(p.looseness),
-                                       p.looseness)
+    rings, _, _ = _strapped_torso(body, mesh, h, z_top, z_bot, x_in, x_out, _BodyRadius(p.looseness), p.looseness)
     return mesh, _band_pins(mesh.n, rings[0])
 
 
@@ -213,7 +214,9 @@ def _build_tshirt(body: TemplateBody, p: TShirtParams, h: float) -> tuple[_Mesh,
     mesh = _Mesh()
     x_in = p.neck_width
     x_out = max(x_in + 0.03, body.shoulder_x - 0.02)
-    rings, panels, info = _strapped_torso(body, mesh, h, z_top, z_bot, x_in, x_out, _BodyRadius(p.looseness), p.looseness)
+    rings, panels, info = _strapped_torso(
+        body, mesh, h, z_top, z_bot, x_in, x_out, _BodyRadius(p.looseness), p.looseness
+    )
     top = rings[0]
     V, _ = mesh.arrays()
     for side in ("L", "R"):

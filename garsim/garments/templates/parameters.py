@@ -14,7 +14,7 @@ import numpy as np
 # ---------------------------------------------------------------------------------------------
 @dataclass
 class _Params:
-    """Base: every field is a float with a valid range and a sampling range in ``RANGES`` (valid lo, hi, sampling lo, hi)."""
+    """Base: every field is a float with a valid and a sampling range in ``RANGES`` (valid lo, hi, sampling lo, hi)."""
 
     RANGES: ClassVar[dict[str, tuple[float, float, float, float]]] = {}
 

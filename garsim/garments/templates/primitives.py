@@ -207,7 +207,9 @@ def _torso_with_straps(
     c_fo = _angle_at_x(c, dense, r, c[0] - x_out, -np.pi, -half)
     c_fi = _angle_at_x(c, dense, r, c[0] - x_in, -np.pi, -half)
     breaks = [c_fo, c_fi, a_fi, a_fo, b_fo, b_fi, d_fi, d_fo]
-    pts = np.stack([c[0] + np.interp(breaks, dense, r) * np.cos(breaks), c[1] + np.interp(breaks, dense, r) * np.sin(breaks)], 1)
+    pts = np.stack(
+        [c[0] + np.interp(breaks, dense, r) * np.cos(breaks), c[1] + np.interp(breaks, dense, r) * np.sin(breaks)], 1
+    )
 
     def seg(i: int, j: int, minimum: int) -> int:
         # arc length along the dense profile between break angles
@@ -366,8 +368,10 @@ def _sleeve(
     end = radii[-1][None]
     blend = (1 - t) * rho[None] + t * end
     radii = np.maximum(radii, blend)
-    pts = p0 + ss[:, None, None] * axis + radii[..., None] * (
-        np.cos(phi)[None, :, None] * e1 + np.sin(phi)[None, :, None] * e2
+    pts = (
+        p0
+        + ss[:, None, None] * axis
+        + radii[..., None] * (np.cos(phi)[None, :, None] * e1 + np.sin(phi)[None, :, None] * e2)
     )
     idx = mesh.add(pts)
     rings = [np.asarray(loop)] + list(idx)
