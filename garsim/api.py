@@ -169,14 +169,20 @@ class GarSim:
     """
 
     def __init__(
-        self, model: Any = None, collision_margin: float | None = 0.002, max_vertices: int | None = None
+        self,
+        model: Any = None,
+        collision_margin: float | None = 0.002,
+        max_vertices: int | None = None,
+        refine: bool = False,
     ) -> None:
         """``collision_margin`` (metres): predicted vertices inside the target body, or nearer than
         this, are pushed out along the body's blended normal at their soft anchor (None keeps the raw
-        network output). ``max_vertices``: a denser garment is draped by the network at about this many
-        vertices (decimated) and its correction to the prior carried back barycentrically; None (the
-        default) runs the network on the garment as given. Decimation depends on the vertex and face
-        order and on tiny changes of the input, so it is off unless asked for."""
+        network output). ``refine``: instead of that push-out, a few iterations of physical constraint
+        projection (``garsim.refine``: edges within the fabric's stretch limit, vertices and edges
+        ``collision_margin`` outside the body's triangles). ``max_vertices``: a denser garment is draped
+        by the network at about this many vertices (decimated) and its correction to the prior carried
+        back barycentrically; None (the default) runs the network on the garment as given. Decimation
+        depends on the vertex and face order and on tiny changes of the input, so it is off unless asked for."""
         if collision_margin is not None and not (0.0 <= collision_margin < 0.05):
             raise ValueError(f"collision_margin is in metres, in [0, 0.05), got {collision_margin}")
         if max_vertices is not None and max_vertices < 100:
@@ -184,6 +190,7 @@ class GarSim:
         self.model = model
         self.collision_margin = collision_margin
         self.max_vertices = max_vertices
+        self.refine = bool(refine)
 
     def _network(self, sample: Sample) -> np.ndarray:
         """The network's garment, at the garment's own resolution up to ``max_vertices``."""
@@ -212,10 +219,22 @@ class GarSim:
 
     def predict(self, sample: Sample) -> np.ndarray:
         """The model's garment for a prepared sample (the prior when there is no model)."""
-        if self.model is None:
-            return sample.prior
-        pred = self._network(sample)
-        if self.collision_margin is not None:
+        pred = np.array(sample.prior, dtype=np.float32) if self.model is None else self._network(sample)
+        if self.refine:
+            from garsim.model.inputs import sample_fabric
+            from garsim.refine import refine
+
+            pred = refine(
+                pred,
+                sample.garment,
+                sample.garment_faces,
+                sample.body_target,
+                sample.body_faces,
+                fabric=sample_fabric(sample),
+                pinned=sample.pinned,
+                margin=self.collision_margin if self.collision_margin is not None else 0.002,
+            )
+        elif self.model is not None and self.collision_margin is not None:
             normals = cached_vertex_normals(sample.body_target, sample.body_faces)
             pred = push_outside(pred, sample.body_target, normals, self.collision_margin)
         pred[sample.pinned] = sample.prior[sample.pinned]  # a user's pins (waistbands, straps) follow the body
@@ -223,15 +242,17 @@ class GarSim:
 
     @property
     def name(self) -> str:
-        return "GarSim model" if self.model is not None else "skinning prior"
+        base = "GarSim model" if self.model is not None else "skinning prior"
+        return base + (" + refine" if self.refine else "")
 
     @classmethod
-    def prior_only(cls) -> GarSim:
-        return cls(model=None)
+    def prior_only(cls, refine: bool = False) -> GarSim:
+        """The skinning prior alone (``refine=True``: the prior + physical refinement, a baseline)."""
+        return cls(model=None, refine=refine)
 
     @classmethod
-    def pretrained(cls) -> GarSim:
-        """The model shipped inside the package (``garsim/weights``)."""
+    def pretrained(cls, **options: Any) -> GarSim:
+        """The model shipped inside the package (``garsim/weights``); ``options`` as ``GarSim(...)``."""
         from garsim.model.garsim import WEIGHTS_FILE, GarSimModel
 
         if not (WEIGHTS_DIR / WEIGHTS_FILE).exists():
@@ -239,14 +260,14 @@ class GarSim:
                 f"no pretrained weights at {WEIGHTS_DIR / WEIGHTS_FILE}: this build ships no trained model; "
                 "use GarSim.prior_only() (or `garsim drape --prior-only`)"
             )
-        return cls(model=GarSimModel.load(WEIGHTS_DIR))
+        return cls(model=GarSimModel.load(WEIGHTS_DIR), **options)
 
     @classmethod
-    def load(cls, directory: str | Path) -> GarSim:
-        """A model saved by training (a folder with model.safetensors + config.json)."""
+    def load(cls, directory: str | Path, **options: Any) -> GarSim:
+        """A model saved by training (model.safetensors + config.json); ``options`` as ``GarSim(...)``."""
         from garsim.model.garsim import GarSimModel
 
-        return cls(model=GarSimModel.load(directory))
+        return cls(model=GarSimModel.load(directory), **options)
 
     @classmethod
     def default(cls) -> GarSim:

@@ -170,3 +170,21 @@ def test_pinned_vertices_follow_the_prior_and_sequences_match_single_drapes(anny
     seq = sim.drape_sequence(bodies[0], [c.vertices, t.vertices], (g.vertices, g.faces), pinned=pins)
     assert seq.shape == (2, len(g.vertices), 3)
     np.testing.assert_allclose(seq[1], out, atol=1e-6)
+
+
+def test_refine_option_pushes_a_garment_out_of_the_body(anny_body, scene):
+    """prior + refine (a baseline) on a skirt shrunk 3 cm towards the body: nothing stays inside it."""
+    from garsim.geometry.inside import InsideTester
+
+    c, t, g = scene
+    axis = np.array([g.vertices[:, 0].mean(), g.vertices[:, 1].mean(), 0.0])
+    shrunk = (
+        g.vertices
+        - 0.03 * (g.vertices - axis) * [1, 1, 0] / np.linalg.norm((g.vertices - axis)[:, :2], axis=1)[:, None]
+    )
+    body = (c.vertices, anny_body.faces)
+    raw = GarSim.prior_only().drape(body, body, (shrunk, g.faces))
+    fixed = GarSim.prior_only(refine=True).drape(body, body, (shrunk, g.faces))
+    tester = InsideTester(c.vertices, anny_body.faces)
+    assert tester.inside(raw).mean() > 0.01 and tester.inside(fixed).mean() < 0.005
+    assert GarSim.prior_only(refine=True).name == "skinning prior + refine"
