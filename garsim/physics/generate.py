@@ -48,7 +48,10 @@ ERRORS = "errors.jsonl"
 FAMILIES: tuple[str, ...] = ("skirt", "top", "tshirt", "longsleeve", "trousers", "dress")
 TEMPLATE_FAMILIES: tuple[str, ...] = ("skirt", "top", "tshirt", "trousers", "dress")
 """Families the parametric templates build (long sleeves come from the implicit construction only)."""
-SLEEVED: frozenset[str] = frozenset({"tshirt", "longsleeve"})
+ARMHOLE_FAMILIES: frozenset[str] = frozenset({"top", "tshirt", "longsleeve", "dress"})
+"""Families with armholes or sleeves: arms more than ~50 deg below or ~25 deg above their canonical position
+trap the cloth between arm and torso (edges stretched ~2x in every fabric alike), so their poses keep the
+arms in that range."""
 CONSTRUCTIONS: tuple[str, ...] = ("template", "implicit")
 WAIST_FAMILIES: frozenset[str] = frozenset({"skirt", "trousers"})
 SHOULDER_PIN_BAND = 0.04
@@ -173,9 +176,9 @@ def _canonical_arm(rng: np.random.Generator) -> float:
 
 def _pose_modes(family: str, rng: np.random.Generator, count: int) -> list[str]:
     """Everyday poses for all; walking frames and the sampler's wide range where the family survives them."""
-    if family in SLEEVED:
+    if family in ARMHOLE_FAMILIES:
         return ["everyday"] * count
-    if family in ("skirt", "top"):
+    if family == "skirt":
         return [str(m) for m in rng.choice(["everyday", "walk", "wide"], size=count, p=[0.55, 0.25, 0.2])]
     return [str(m) for m in rng.choice(["everyday", "walk"], size=count, p=[0.7, 0.3])]
 
@@ -253,7 +256,7 @@ def target_poses(job: JobSpec, body: Any) -> list[dict[str, np.ndarray]]:
 
     rng = np.random.default_rng(job.pose_seed)
     everyday = EVERYDAY_LIMITS
-    if job.family in SLEEVED:  # sleeves cut for the canonical arms survive arms within ~-50..+25 deg of it
+    if job.family in ARMHOLE_FAMILIES:  # armholes cut for the canonical arms survive arms within ~-50..+25 deg
         lo, hi = everyday.shoulder_elevation
         everyday = replace(
             everyday, shoulder_elevation=(max(lo, job.canonical_arm - 50.0), min(hi, job.canonical_arm + 25.0))
