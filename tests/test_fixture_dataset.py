@@ -1,5 +1,6 @@
-"""The committed fixture: 5 real Newton sequences (last 2 frames, low resolution) from the dataset
-made by `garsim data generate --out ~/garsim-data/v1 --seed 0 --workers 2 --vertices 800`."""
+"""The committed fixture: real settled Newton samples (low resolution, last settled state) exported from the v2
+dataset by `examples/make_fixture.py --data ~/garsim-data/v2` (one per family and construction, every canonical
+pose, physical fabric values, one paired-fabric group)."""
 
 from pathlib import Path
 
@@ -8,17 +9,34 @@ import numpy as np
 from garsim.data.store import DatasetStore
 from garsim.eval.metrics import collision_pct, euclidean_error_mm
 
-FIXTURE = Path(__file__).parent / "fixtures" / "dataset"
+FIXTURE = Path(__file__).parent / "fixtures" / "dataset_v2"
 
 
-def test_fixture_is_intact_and_physical():
+def test_fixture_is_intact_settled_and_physical():
     store = DatasetStore(FIXTURE)
     assert store.verify() == []
+    entries = store.entries()
+    assert {e["construction"] for e in entries} == {"template", "implicit"}
+    assert len({e["garment_type"] for e in entries}) >= 5
     samples = store.samples(resolution="low")
-    assert len(samples) == 10 and {s.garment_type for s in samples} == {"skirt", "top", "dress"}
     for s in samples:
-        assert np.isfinite(s.target).all()
+        assert np.isfinite(s.target).all() and s.meta["settled"][-1] and max(s.meta["final_speed"]) < 0.02
         assert collision_pct(s.target, s.body_target, s.body_faces) < 5.0  # the simulator kept cloth outside
-        # the prior moves with the body but misses the cloth dynamics: it is centimetres off
-        assert 5.0 < euclidean_error_mm(s.prior, s.target) < 400.0
-        assert s.pinned.any() and len(s.garment) < 400  # ~4x decimated from 800 vertices
+        assert 1.0 < euclidean_error_mm(s.prior, s.target) < 400.0  # the prior misses the cloth's response
+        assert s.fabric_values and s.fabric_values["bending"] > 0  # physical values stored with every sample
+
+
+def test_fixture_holds_a_paired_group_ordered_like_real_fabrics():
+    """One template in four fabrics, same body and pose: the stiffest stands off the body at least as far."""
+    from garsim.physics.newton_sim import mean_body_distance
+
+    store = DatasetStore(FIXTURE)
+    groups: dict[str, dict[str, float]] = {}
+    for rec in store.sequences():
+        if rec.meta.get("paired"):
+            lv = rec.levels["low"]
+            groups.setdefault(rec.meta["job"], {})[rec.fabric] = mean_body_distance(lv.targets[-1], rec.body_targets[-1])
+    full = [g for g in groups.values() if len(g) == 4]
+    assert full, "the fixture needs one complete paired group"
+    g = full[0]
+    assert g["leather"] >= g["silk"] - 0.002, g

@@ -28,3 +28,21 @@ def test_both_resolutions(store_dir):
     assert len(val) == 4
     with pytest.raises(ValueError, match="resolution must be one of"):
         train_val_samples(store_dir, "medium")
+
+
+def test_rest_samples_teach_a_still_body_to_leave_the_template(tmp_path):
+    import numpy as np
+
+    store = DatasetStore(tmp_path)
+    for i in range(3):
+        rec = make_record(f"train-{i}", "train", k=2, seed=i)
+        rec.meta["settle"] = {"settled": True}
+        store.append_manifest(store.write_sequence(rec))
+    train, val = train_val_samples(tmp_path, "low", val_every=3)
+    rest = [s for s in train if s.meta.get("rest")]
+    assert len(rest) == 2 and not any(s.meta.get("rest") for s in val)  # one per settled training record
+    for s in rest:
+        np.testing.assert_array_equal(s.body_target, s.body_canonical)
+        np.testing.assert_array_equal(s.target, s.garment)
+        np.testing.assert_array_equal(s.prior, s.garment)
+    assert len(train_val_samples(tmp_path, "low", val_every=3, rest=False)[0]) == 4
