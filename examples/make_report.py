@@ -1,8 +1,9 @@
-"""Write the result figures of a trained model into docs/: training curve, fabric awareness,
-error maps of test samples (model vs prior).
+"""Write docs/results.md (and its figures) from a trained model's measured results: the training curve, the
+test / ood tables of `garsim eval --refine --out`, the paired-fabric agreement, the external check (raw network
+and API defaults, from check.py --json) and error maps of test samples (prior, prediction, ground truth).
 
 Run: .venv/bin/python examples/make_report.py --run ~/garsim-runs/v1 --data ~/garsim-data/v2 \
-    --results docs/results.json
+    --results docs/results.json --external docs/external_default.json docs/external_raw.json
 """
 
 from __future__ import annotations
@@ -15,8 +16,23 @@ import numpy as np
 
 from garsim.api import GarSim
 from garsim.data.store import DatasetStore
-from garsim.eval.plots import plot_bars, plot_training_curve
+from garsim.eval.experiments import format_table
+from garsim.eval.plots import plot_training_curve
 from garsim.geometry.render import render_grid
+
+
+def _external_table(paths: list[Path]) -> str:
+    lines = ["| run | garment | n | prior mm | pred mm | ratio | coll. % | inside % | edges through % |", "|---|" * 9]
+    for path in paths:
+        summary = json.loads(path.read_text())["summary"]
+        for kind, s in summary.items():
+            p = s.get("pred", {})
+            lines.append(
+                f"| {path.stem} | {kind} | {s['n']} | {s['prior']['euclid_mm']:.1f} | {p.get('euclid_mm', float('nan')):.1f} | "
+                f"{s.get('ratio', float('nan')):.2f} | {p.get('collision_pct', float('nan')):.2f} | "
+                f"{p.get('inside_pct', float('nan')):.2f} | {p.get('edge_crossing_pct', float('nan')):.2f} |"
+            )
+    return "\n".join(lines)
 
 
 def main() -> None:
@@ -24,47 +40,62 @@ def main() -> None:
     parser.add_argument("--run", required=True, nargs="+", help="training run folder(s) (log.csv), stages in order")
     parser.add_argument("--model", default=None, help="model folder (default: the shipped model)")
     parser.add_argument("--data", required=True)
-    parser.add_argument("--results", required=True, help="JSON written by `garsim eval --out`")
+    parser.add_argument("--results", required=True, help="JSON written by `garsim eval --refine --out`")
+    parser.add_argument("--external", nargs="*", default=[], help="JSON files written by check.py --json")
     parser.add_argument("--docs", default="docs")
-    parser.add_argument("--samples", type=int, default=4)
+    parser.add_argument("--samples", type=int, default=6)
     args = parser.parse_args()
     docs = Path(args.docs)
-    print(plot_training_curve([Path(r) / "log.csv" for r in args.run], docs / "training_curve.png"))
+    curve = plot_training_curve([Path(r) / "log.csv" for r in args.run], docs / "training_curve.png")
     results = json.loads(Path(args.results).read_text())
-    if "fabric_distance_mm" in results:
-        fab = results["fabric_distance_mm"]
-        values = {f: {s: fab[s][f] for s in fab if f in fab[s]} for f in fab["garsim"]}
-        print(
-            plot_bars(
-                values,
-                "mean garment-to-body distance (mm)",
-                "Fabric awareness: the same test skirts predicted in each fabric",
-                docs / "fabric_awareness.png",
-            )
-        )
     sim = GarSim.load(args.model) if args.model else GarSim.pretrained()
     store = DatasetStore(args.data)
-    recs = [r for r in store.sequences("test")][: args.samples]
+    recs = [r for r in store.sequences("test")]
+    rng = np.random.default_rng(0)
+    pick = [recs[i] for i in rng.choice(len(recs), size=min(args.samples, len(recs)), replace=False)]
     panels, titles, colors = [], [], []
-    for rec in recs:
+    for rec in pick:
         s = rec.samples("low")[-1]
-        pred = sim.predict(s)
-        for name, verts in (("prior", s.prior), ("GarSim", pred), ("ground truth", s.target)):
+        pred = sim.model.predict(s)
+        for name, verts in (("prior", s.prior), ("GarSim (raw)", pred), ("ground truth", s.target)):
             err = 1000 * np.linalg.norm(verts - s.target, axis=1)
             panels.append([(s.body_target, s.body_faces), (verts, s.garment_faces)])
-            colors.append([None, np.clip(err, 0, 150)])
+            colors.append([None, np.clip(err, 0, 100)])
             titles.append(f"{rec.garment_type}/{rec.fabric} {name}: {err.mean():.0f} mm")
-    print(
-        render_grid(
-            docs / "test_predictions.png",
-            panels,
-            ncols=3,
-            titles=titles,
-            views=("front",),
-            colors=colors,
-            suptitle="Test split (unseen garments, bodies, poses): error to Newton, 0-150 mm",
-        )
+    maps = render_grid(
+        docs / "test_predictions.png",
+        panels,
+        ncols=3,
+        titles=titles,
+        views=("front",),
+        colors=colors,
+        suptitle="Test split: error to Newton per vertex, 0-100 mm",
     )
+    parts = [
+        f"# GarSim results\n\nModel: `{results['model']}`; data: `{args.data}` ({results['resolution']} resolution).",
+        f"Training curve: `{curve.name}`. Error maps of random test samples: `{maps.name}`.",
+    ]
+    for split in ("test", "ood"):
+        if split in results:
+            parts.append(
+                f"## {split} split\n`garsim eval --data {args.data} --refine --out {args.results}`\n\n"
+                + format_table(results[split])
+            )
+    fab = results.get("paired_fabrics")
+    if fab:
+        parts.append(
+            f"## Paired fabrics (test)\n{fab['groups']} groups; ordering agreement "
+            f"{fab['ordering_agreement']} over {fab['pairs_over_gap']} neighbouring pairs whose simulated values "
+            f"differ by more than 2 mm / 2 deg; predicted / simulated spread {fab['spread_ratio']}."
+        )
+    if args.external:
+        parts.append(
+            "## External check set (`../shared/external-eval/check.py`)\n"
+            + _external_table([Path(p) for p in args.external])
+        )
+    out = docs / "results.md"
+    out.write_text("\n\n".join(parts) + "\n")
+    print(out)
 
 
 if __name__ == "__main__":

@@ -209,26 +209,19 @@ def cmd_train(args: argparse.Namespace) -> int:
 
 def cmd_eval(args: argparse.Namespace) -> int:
     from garsim.api import GarSim
-    from garsim.eval.experiments import (
-        evaluate_split,
-        fabric_awareness,
-        format_table,
-        ground_truth_fabric_distances,
-    )
+    from garsim.eval.experiments import evaluate_split, format_table, paired_fabric_agreement
 
     sim = GarSim.load(args.model) if args.model else GarSim.default()
     report: dict = {"model": args.model or sim.name, "resolution": args.resolution}
     for split in args.splits:
-        report[split] = evaluate_split(sim.model, args.data, split, args.resolution)
+        report[split] = evaluate_split(sim.model, args.data, split, args.resolution, refine=args.refine)
         print(f"## {split} split ({args.resolution} resolution)\n{format_table(report[split])}\n")
     if sim.model is not None:
-        report["fabric_distance_mm"] = {
-            "garsim": fabric_awareness(sim.model, args.data, resolution=args.resolution),
-            "ground_truth": ground_truth_fabric_distances(args.data, resolution=args.resolution),
-        }
+        fab = paired_fabric_agreement(sim.model, args.data, resolution=args.resolution)
+        report["paired_fabrics"] = fab
         print(
-            "fabric awareness (test skirts, mean garment-to-body distance, mm):",
-            json.dumps(report["fabric_distance_mm"], indent=1),
+            f"paired-fabric groups (test): {fab['groups']}, ordering agreement {fab['ordering_agreement']} over "
+            f"{fab['pairs_over_gap']} neighbouring pairs past the gap, spread ratio {fab['spread_ratio']}"
         )
     if args.out:
         print(_write_json(args.out, report))
@@ -357,6 +350,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--data", required=True, help="dataset folder")
     p.add_argument("--model", help="a trained model folder (default: the shipped model)")
     p.add_argument("--splits", nargs="+", default=["test", "ood"])
+    p.add_argument("--refine", action="store_true", help="also score garsim+refine and prior+refine")
     p.add_argument("--resolution", choices=("low", "full"), default="low")
     p.add_argument("--out", help="write the results as JSON here")
     p.set_defaults(func=cmd_eval)

@@ -1,7 +1,8 @@
 import numpy as np
+import pytest
 
 from garsim.data.store import DatasetStore, GarmentLevel, SequenceRecord
-from garsim.eval.experiments import evaluate_split, fabric_awareness, format_table, ground_truth_fabric_distances
+from garsim.eval.experiments import evaluate_split, format_table
 
 
 def _store(tmp_path):
@@ -33,16 +34,42 @@ def test_evaluate_prior_error_is_the_known_offset(tmp_path):
     assert "| prior | skirt | 2 | 10.00 |" in format_table(res)
 
 
-class _Oracle:
-    """A 'model' that returns the ground truth scaled by fabric (checks fabric plumbing)."""
+def test_paired_fabric_agreement_of_an_oracle_and_of_a_reversed_model(tmp_path):
+    """A paired group whose simulated drapes stand 10, 20, 30, 40 mm off a sphere: the truth agrees 100%."""
+    import trimesh
 
-    def predict(self, samples):
-        scale = {"silk": 1.0, "cotton": 1.01, "denim": 1.02, "leather": 1.03}
-        return [s.prior * scale[s.fabric] for s in samples]
+    from garsim.eval.experiments import paired_fabric_agreement
 
+    body = trimesh.creation.icosphere(subdivisions=3)
+    bv, bf = np.asarray(body.vertices, np.float32), np.asarray(body.faces)
+    patch = trimesh.creation.icosphere(subdivisions=1)
+    gv, gf = np.asarray(patch.vertices, np.float32), np.asarray(patch.faces)
+    store = DatasetStore(tmp_path)
+    for k, fabric in enumerate(["silk", "cotton", "denim", "leather"]):
+        truth = (gv * (1.0 + 0.01 * (k + 1)))[None].astype(np.float32)
+        lv = GarmentLevel(gv * 1.01, gf, np.zeros(len(gv), bool), gv[None] * 1.01, truth)
+        rec = SequenceRecord(
+            f"test-0-{fabric}",
+            "test",
+            "skirt",
+            fabric,
+            bv,
+            bv[None],
+            bf,
+            np.array([0]),
+            {"low": lv},
+            meta={"paired": True, "job": "test-0"},
+        )
+        store.append_manifest(store.write_sequence(rec))
 
-def test_fabric_awareness_uses_each_fabric(tmp_path):
-    d = fabric_awareness(_Oracle(), _store(tmp_path), garment_type="skirt")
-    assert d["silk"] < d["cotton"] < d["denim"] < d["leather"]
-    assert abs(d["silk"] - 50.0) < 1.0  # garment at radius 1.05 over a unit sphere (icosphere vertices)
-    assert set(ground_truth_fabric_distances(tmp_path, garment_type="skirt")) == {"silk"}
+    class Truth:
+        def predict(self, samples):
+            return [s.target for s in samples]
+
+    class Reversed:
+        def predict(self, samples):
+            return [s.target for s in samples][::-1]
+
+    good = paired_fabric_agreement(Truth(), tmp_path)
+    assert good["groups"] == 1 and good["ordering_agreement"] == 1.0 and good["spread_ratio"] == pytest.approx(1.0)
+    assert paired_fabric_agreement(Reversed(), tmp_path)["ordering_agreement"] == 0.0

@@ -1,10 +1,10 @@
-"""The paper's experiments on a generated dataset: accuracy per garment type against the LBS
-prior (Table 3), fabric awareness (Fig. 7), and generalisation to unseen garment types.
+"""The paper's experiments on a generated dataset: accuracy per garment type against the LBS prior (Table 3)
+with the API's post-processes and refinement beside the raw network, and fabric awareness on paired groups
+(Fig. 7: one template in four fabrics, simulated vs predicted).
 """
 
 from __future__ import annotations
 
-import dataclasses
 import os
 from collections import defaultdict
 from typing import Any
@@ -35,19 +35,32 @@ def _pushed(preds: list[np.ndarray], samples: list[Sample], margin: float) -> li
     ]
 
 
+def _refined(preds: list[np.ndarray], samples: list[Sample]) -> list[np.ndarray]:
+    """The API's physical refinement (``garsim.refine``) applied to predictions."""
+    from garsim.model.inputs import sample_fabric
+    from garsim.refine import refine
+
+    return [
+        refine(p, s.garment, s.garment_faces, s.body_target, s.body_faces, fabric=sample_fabric(s), pinned=s.pinned)
+        for p, s in zip(preds, samples)
+    ]
+
+
 def evaluate_split(
     model: Any,
     data_dir: str | os.PathLike,
     split: str = "test",
     resolution: str = "low",
     collision_margin: float | None = 0.002,
+    refine: bool = False,
 ) -> dict[str, dict[str, dict[str, float]]]:
     """Mean metrics per garment type (and 'all') for the model and for the prior baseline.
 
     Returns {method: {garment_type: {metric: value, "frames": n}}} with methods "garsim" (raw network
     output), "garsim+push" (with the API's collision post-process, when ``collision_margin``), "prior",
     and "ground truth" (the simulation itself: the reference for normal consistency, smoothness and
-    the collision count, which flags some simulated cloth too on a coarse body mesh).
+    the collision count, which flags some simulated cloth too on a coarse body mesh); with ``refine`` also
+    "garsim+refine" and "prior+refine" (``garsim.refine`` after the network / after the prior alone).
     """
     samples = DatasetStore(data_dir).samples(split, resolution)
     if not samples:
@@ -58,6 +71,10 @@ def evaluate_split(
         predictions["garsim"] = _predict_all(model, samples)
         if collision_margin is not None:
             predictions["garsim+push"] = _pushed(predictions["garsim"], samples, collision_margin)
+        if refine:
+            predictions["garsim+refine"] = _refined(predictions["garsim"], samples)
+    if refine:
+        predictions["prior+refine"] = _refined(predictions["prior"], samples)
     for name in sorted(predictions, key=lambda k: (k in ("prior", "ground truth"), k)):
         preds = predictions[name]
         rows: dict[str, list[dict[str, float]]] = defaultdict(list)
@@ -72,43 +89,59 @@ def evaluate_split(
     return results
 
 
-def fabric_awareness(
+def paired_fabric_agreement(
     model: Any,
     data_dir: str | os.PathLike,
     split: str = "test",
-    garment_type: str = "skirt",
     resolution: str = "low",
-    max_samples: int = 200,
-) -> dict[str, float]:
-    """Fig. 7: predict the same test garments in every fabric; mean garment-to-body distance (mm).
+    min_gap_mm: float = 2.0,
+    min_gap_deg: float = 2.0,
+) -> dict[str, Any]:
+    """Fig. 7 on paired groups (one template, four fabrics, same body and pose): simulated vs predicted mean
+    distance to the body (mm) and mean fold angle (deg) per fabric, the share of neighbouring fabric pairs
+    (silk-cotton, cotton-denim, denim-leather) whose simulated values differ by more than the gap and whose
+    predictions are ordered the same way, and the predicted / simulated spread (lightest to stiffest)."""
+    from garsim.physics.newton_sim import mean_fold_angle
 
-    Only the final (settled) frame of each sequence is used, as the paper compares drapes.
-    """
     store = DatasetStore(data_dir)
-    samples = [rec.samples(resolution)[-1] for rec in store.sequences(split) if rec.garment_type == garment_type]
-    samples = samples[:max_samples]
-    if not samples:
-        raise ValueError(f"{data_dir}: no {garment_type} in the {split!r} split")
-    out = {}
-    for fabric in FABRICS:
-        variants = [dataclasses.replace(s, fabric=fabric) for s in samples]
-        preds = _predict_all(model, variants)
-        dist = [nearest_vertices(p, s.body_target)[1].mean() for s, p in zip(variants, preds)]
-        out[fabric] = 1000.0 * float(np.mean(dist))
-    return out
-
-
-def ground_truth_fabric_distances(
-    data_dir: str | os.PathLike, split: str = "test", garment_type: str = "skirt", resolution: str = "low"
-) -> dict[str, float]:
-    """Mean garment-to-body distance (mm) of the simulated final frames per fabric (the reference)."""
-    store = DatasetStore(data_dir)
-    dist: dict[str, list[float]] = defaultdict(list)
+    groups: dict[tuple[str, int], dict[str, Sample]] = defaultdict(dict)
     for rec in store.sequences(split):
-        if rec.garment_type == garment_type:
-            s = rec.samples(resolution)[-1]
-            dist[s.fabric].append(float(nearest_vertices(s.target, s.body_target)[1].mean()))
-    return {f: 1000.0 * float(np.mean(dist[f])) for f in FABRICS if dist[f]}
+        if rec.meta.get("paired"):
+            for s in rec.samples(resolution):
+                groups[(rec.meta["job"], s.meta["frame"])][s.fabric] = s
+    complete = [g for g in groups.values() if set(g) == set(FABRICS)]
+    rows, agree, pairs, spread = [], 0, 0, []
+    for g in complete:
+        samples = [g[f] for f in FABRICS]
+        preds = _predict_all(model, samples)
+        sim_d = [1000.0 * float(nearest_vertices(s.target, s.body_target)[1].mean()) for s in samples]
+        pred_d = [1000.0 * float(nearest_vertices(p, s.body_target)[1].mean()) for s, p in zip(samples, preds)]
+        sim_a = [mean_fold_angle(s.target, s.garment_faces) for s in samples]
+        pred_a = [mean_fold_angle(p, s.garment_faces) for s, p in zip(samples, preds)]
+        for sim, pred, gap in ((sim_d, pred_d, min_gap_mm), (sim_a, pred_a, min_gap_deg)):
+            for i in range(len(FABRICS) - 1):
+                if abs(sim[i + 1] - sim[i]) > gap:
+                    pairs += 1
+                    agree += int(np.sign(pred[i + 1] - pred[i]) == np.sign(sim[i + 1] - sim[i]))
+        if abs(sim_d[-1] - sim_d[0]) > min_gap_mm:
+            spread.append((pred_d[-1] - pred_d[0]) / (sim_d[-1] - sim_d[0]))
+        rows.append(
+            {
+                "garment": samples[0].garment_type,
+                "name": samples[0].meta.get("name", ""),
+                "sim_distance_mm": sim_d,
+                "pred_distance_mm": pred_d,
+                "sim_fold_deg": sim_a,
+                "pred_fold_deg": pred_a,
+            }
+        )
+    return {
+        "groups": len(complete),
+        "pairs_over_gap": pairs,
+        "ordering_agreement": agree / pairs if pairs else None,
+        "spread_ratio": float(np.mean(spread)) if spread else None,
+        "rows": rows,
+    }
 
 
 def format_table(results: dict[str, dict[str, dict[str, float]]]) -> str:
