@@ -28,7 +28,8 @@ def _external_table(paths: list[Path]) -> str:
         for kind, s in summary.items():
             p = s.get("pred", {})
             lines.append(
-                f"| {path.stem} | {kind} | {s['n']} | {s['prior']['euclid_mm']:.1f} | {p.get('euclid_mm', float('nan')):.1f} | "
+                f"| {path.stem} | {kind} | {s['n']} | {s['prior']['euclid_mm']:.1f} | "
+                f"{p.get('euclid_mm', float('nan')):.1f} | "
                 f"{s.get('ratio', float('nan')):.2f} | {p.get('collision_pct', float('nan')):.2f} | "
                 f"{p.get('inside_pct', float('nan')):.2f} | {p.get('edge_crossing_pct', float('nan')):.2f} |"
             )

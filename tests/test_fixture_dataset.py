@@ -35,7 +35,8 @@ def test_fixture_holds_a_paired_group_ordered_like_real_fabrics():
     for rec in store.sequences():
         if rec.meta.get("paired"):
             lv = rec.levels["low"]
-            groups.setdefault(rec.meta["job"], {})[rec.fabric] = mean_body_distance(lv.targets[-1], rec.body_targets[-1])
+            dist = mean_body_distance(lv.targets[-1], rec.body_targets[-1])
+            groups.setdefault(rec.meta["job"], {})[rec.fabric] = dist
     full = [g for g in groups.values() if len(g) == 4]
     assert full, "the fixture needs one complete paired group"
     g = full[0]
