@@ -200,7 +200,7 @@ def cmd_train(args: argparse.Namespace) -> int:
     if int(os.environ.get("RANK", "0")) == 0:  # record which sequences this run saw (the store may grow later)
         ids = {name: sorted({s.meta["seq_id"] for s in part}) for name, part in (("train", train), ("val", val))}
         _write_json(Path(args.out) / "sequences.json", ids)
-    model_config = init.config if init is not None else GarSimConfig()
+    model_config = init.config if init is not None else GarSimConfig(**({"head": args.head} if args.head else {}))
     history = Trainer(model_config, cfg, train, val, init=init).fit()
     if history:
         print(json.dumps(history[-1], indent=2))
@@ -341,6 +341,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--collision-weight", type=float, help="α_col of Eq. 7 (the paper: 1)")
     p.add_argument("--collision-eps", type=float, help="ε of Eq. 6 in metres (margin kept off the body)")
     p.add_argument("--init", help="start from this trained model folder's weights (fine-tuning)")
+    p.add_argument(
+        "--head",
+        choices=("direction_magnitude", "displacement", "position"),
+        help="decoder head of a new model (default: GarSimConfig's, the paper's direction + magnitude)",
+    )
     p.add_argument("--restart", action="store_true", help="ignore an existing checkpoint in --out")
     p.add_argument("--threads", type=int, help="torch threads per process")
     p.add_argument("--quiet", action="store_true")

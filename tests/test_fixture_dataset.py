@@ -15,9 +15,10 @@ FIXTURE = Path(__file__).parent / "fixtures" / "dataset_v2"
 def test_fixture_is_intact_settled_and_physical():
     store = DatasetStore(FIXTURE)
     assert store.verify() == []
-    entries = store.entries()
-    assert {e["construction"] for e in entries} == {"template", "implicit"}
-    assert len({e["garment_type"] for e in entries}) >= 5
+    records = list(store.sequences())
+    assert {r.meta["construction"] for r in records} == {"template", "implicit"}
+    assert len({r.garment_type for r in records}) >= 5
+    assert len({r.meta["canonical_pose"] for r in records}) == 3
     samples = store.samples(resolution="low")
     for s in samples:
         assert np.isfinite(s.target).all() and s.meta["settled"][-1] and max(s.meta["final_speed"]) < 0.02

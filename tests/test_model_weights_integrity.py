@@ -12,7 +12,7 @@ from garsim.model.config import GarSimConfig
 from garsim.model.garsim import CHECKSUM_KEY, CONFIG_FILE, WEIGHTS_FILE, GarSimModel, WeightsError
 from garsim.model.inputs import build_graph
 
-FIXTURE = Path(__file__).parent / "fixtures" / "dataset"
+FIXTURE = Path(__file__).parent / "fixtures" / "dataset_v2"
 SMALL = {
     "latent": 16,
     "edge_latent": 8,

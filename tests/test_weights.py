@@ -9,7 +9,7 @@ from garsim.api import WEIGHTS_DIR
 from garsim.data.store import DatasetStore
 from garsim.eval.metrics import euclidean_error_mm
 
-FIXTURE = Path(__file__).parent / "fixtures" / "dataset"
+FIXTURE = Path(__file__).parent / "fixtures" / "dataset_v2"
 
 
 def test_shipped_weights_are_small_safetensors():

@@ -27,7 +27,10 @@ class Decoder(nn.Module):
         self.scale = float(cfg.pos_scale)
         d_out = 4 if cfg.head == "direction_magnitude" else 3
         self.mlp = MLP(cfg.latent, cfg.mlp_hidden, d_out, cfg.mlp_layers, cfg.activation, norm=False)
-        self.fabric_gain = nn.Linear(FABRIC_FEATURES, 1) if cfg.fabric_film else None  # log-scale of the magnitude
+        # log-scale of the magnitude (only the direction + magnitude head has one)
+        self.fabric_gain = (
+            nn.Linear(FABRIC_FEATURES, 1) if cfg.fabric_film and cfg.head == "direction_magnitude" else None
+        )
         if self.fabric_gain is not None:
             nn.init.zeros_(self.fabric_gain.weight)
             nn.init.zeros_(self.fabric_gain.bias)
