@@ -90,12 +90,20 @@ def garment_prior(body: BodyModel, canonical: PosedBody, target: PosedBody, garm
 
 def mesh_pair_prior(garment: np.ndarray, canonical: np.ndarray, target: np.ndarray, faces: np.ndarray) -> np.ndarray:
     """The garment prior from two body meshes: Anny-topology bodies get the LBS prior with bone transforms
-    recovered from the meshes (as in training); any other topology the rig-free prior."""
+    recovered from the meshes (as in training); any other topology the rig-free prior.
+
+    Computed about the canonical body's centroid (float64), so moving the whole scene moves the prior with it
+    exactly (the bone fit's damping pulls towards identity transforms, which is not translation invariant).
+    """
     from garsim.bodies.anny import match_anny_rig
     from garsim.bodies.recover import recovered_lbs_prior
 
+    centre = np.asarray(canonical, dtype=np.float64).mean(axis=0)
+    g, c, t = (np.asarray(a, dtype=np.float64) - centre for a in (garment, canonical, target))
     rig = match_anny_rig(len(canonical), faces)
     if rig is None:
-        return rigfree_prior(garment, canonical, target, faces)
-    indices, weights, num_bones = rig
-    return recovered_lbs_prior(garment, canonical, target, indices, weights, num_bones)
+        out = rigfree_prior(g, c, t, faces)
+    else:
+        indices, weights, num_bones = rig
+        out = recovered_lbs_prior(g, c, t, indices, weights, num_bones)
+    return (out.astype(np.float64) + centre).astype(np.float32)
