@@ -15,6 +15,9 @@ from garsim.garments.implicit import (
 from garsim.geometry.inside import InsideTester
 from garsim.geometry.mesh import border_loops, vertex_normals
 
+pytest.importorskip("skimage", reason="the implicit construction needs garsim[sim] (scikit-image, pymeshlab)")
+pytest.importorskip("pymeshlab", reason="the implicit construction needs garsim[sim] (scikit-image, pymeshlab)")
+
 LOOPS = {"skirt": 2, "trousers": 3, "tshirt": 4, "longsleeve": 4, "top": 4, "dress": 4}
 
 
