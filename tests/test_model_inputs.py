@@ -133,7 +133,7 @@ def test_batch_offsets_indices(sample):
 def test_bad_input_messages(sample):
     from dataclasses import replace
 
-    with pytest.raises(ValueError, match="faces index"):
+    with pytest.raises(ValueError, match="reference vertices outside"):
         build_graph(replace(sample, garment_faces=sample.garment_faces + 1000))
     bad = sample.prior.copy()
     bad[0, 0] = np.nan

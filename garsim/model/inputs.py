@@ -34,6 +34,7 @@ from garsim.data.sample import Sample
 from garsim.garments.fabrics import PRESETS as FABRIC_PRESETS
 from garsim.garments.fabrics import Fabric, fabric_from_values, get_fabric
 from garsim.geometry.cache import ContentCache, content_key
+from garsim.geometry.io import as_mesh
 from garsim.geometry.mesh import directed_edges, face_normals, face_pairs, vertex_rings
 from garsim.geometry.proximity import cached_tree, soft_anchor
 from garsim.model.config import FABRIC_FEATURES, GarSimConfig
@@ -237,16 +238,11 @@ def build_graph(
     cfg = config or GarSimConfig()
     body_c = np.asarray(sample.body_canonical, dtype=np.float32)
     body_t = np.asarray(sample.body_target, dtype=np.float32)
-    g = np.asarray(sample.garment, dtype=np.float32)
+    g, faces = as_mesh((sample.garment, sample.garment_faces), f"garment {name or ''}".strip())  # the one validator
     prior = np.asarray(sample.prior, dtype=np.float32)
-    faces = np.asarray(sample.garment_faces, dtype=np.int64)
     n = len(g)
-    if n == 0 or faces.ndim != 2 or faces.shape[1] != 3 or len(faces) == 0:
-        raise ValueError(f"garment needs vertices and (F, 3) triangle faces, got {g.shape} and {faces.shape}")
-    if faces.min() < 0 or faces.max() >= n:
-        raise ValueError(f"garment faces index vertices 0..{faces.max()} but the garment has {n} vertices")
-    if not (np.isfinite(g).all() and np.isfinite(prior).all() and np.isfinite(body_t).all()):
-        raise ValueError(f"sample {name or ''} has non-finite positions (garment, prior or bodies): fix the data")
+    if not (np.isfinite(prior).all() and np.isfinite(body_t).all()):
+        raise ValueError(f"sample {name or ''} has non-finite positions (prior or bodies): fix the data")
 
     # soft anchor q_i: a continuous blend of the canonical body vertices near G_i (cached per garment and body)
     body = body_frame(body_c, sample.body_faces, cfg.canonicalize_yaw)
