@@ -215,3 +215,17 @@ def test_real_jobs_tshirt_and_trousers_pass_the_physics_checks(tmp_path):
         for res in ("full", "low"):
             lv = rec.levels[res]
             assert np.isfinite(lv.targets).all() and lv.targets.shape == (1, len(lv.template), 3)
+
+
+def test_a_garment_the_validator_refuses_is_a_named_rejection(tmp_path, monkeypatch):
+    """A construction that yields zero-area faces is rejected for good (not retried as a transient error)."""
+    from garsim.garments.garment import Garment
+    from garsim.physics.newton_sim import SimulationRejected
+
+    v = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [2, 0, 0]], dtype=np.float32)
+    f = np.array([[0, 1, 2], [0, 1, 3]])  # the second face is collinear: zero area
+    monkeypatch.setattr(gen, "build_garment", lambda job, body: Garment(v, f, np.zeros(4, bool), job.family, {}))
+    cfg = GenerateConfig(out=tmp_path, num_train=1, num_test=0, num_ood=0, workers=1)
+    with pytest.raises(SimulationRejected) as err:
+        gen.simulate_job(plan_jobs(cfg)[0], cfg)
+    assert err.value.reason == gen.REJECT_INVALID_GARMENT and "zero area" in err.value.detail

@@ -44,6 +44,8 @@ from garsim.data.store import REJECTED, DatasetStore, GarmentLevel, SequenceReco
 log = logging.getLogger(__name__)
 
 CONFIG_FILE = "config.json"
+REJECT_INVALID_GARMENT = "invalid_garment"
+"""Rejection reason of a job whose garment construction yields a mesh the validator refuses (e.g. zero-area faces)."""
 ERRORS = "errors.jsonl"
 FAMILIES: tuple[str, ...] = ("skirt", "top", "tshirt", "longsleeve", "trousers", "dress")
 TEMPLATE_FAMILIES: tuple[str, ...] = ("skirt", "top", "tshirt", "trousers", "dress")
@@ -307,6 +309,7 @@ def simulate_job(job: JobSpec, config: GenerateConfig) -> tuple[list[SequenceRec
     from garsim.garments.fabrics import fabric_from_values, nearest_preset
     from garsim.garments.garment import Garment
     from garsim.garments.remesh import decimate, transfer_barycentric
+    from garsim.geometry.io import MeshError, validate_mesh
     from garsim.physics.newton_sim import (
         SimConfig,
         SimulationRejected,
@@ -320,7 +323,11 @@ def simulate_job(job: JobSpec, config: GenerateConfig) -> tuple[list[SequenceRec
     sim_cfg = SimConfig(**config.sim)
     body = AnnyBody(job.phenotype)
     tpose = body.canonical()
-    garment = build_garment(job, body)
+    try:
+        garment = build_garment(job, body)
+        validate_mesh(garment.vertices, garment.faces, f"{job.construction} {job.family}")
+    except MeshError as exc:  # a construction that yields a broken mesh is a permanent, named rejection
+        raise SimulationRejected(REJECT_INVALID_GARMENT, str(exc)) from None
     arm_pose = _arm_pose(job.canonical_arm)
     canonical = body.pose(arm_pose)
     if job.canonical_arm != T_POSE_ARM:  # skin the T-pose garment to the job's canonical arms
