@@ -161,6 +161,34 @@ def _coarse_copy(sample: Sample, max_vertices: int) -> tuple[Garment, Barycentri
     return low, to_low, barycentric_map(sample.garment, low.vertices, low.faces)
 
 
+def postprocess(
+    pred: np.ndarray, sample: Sample, collision_margin: float | None = 0.002, refine: bool = True
+) -> np.ndarray:
+    """The API's post-process of a raw prediction: physical refinement (``garsim.refine``) or, with
+    ``refine=False``, the push-out along the soft anchor's normal, to ``collision_margin`` metres outside the
+    target body (None: the raw prediction); the sample's pinned vertices then follow the prior exactly."""
+    pred = np.array(pred, dtype=np.float32)
+    if collision_margin is not None and refine:
+        from garsim.model.inputs import sample_fabric
+        from garsim.refine import refine as refine_garment
+
+        pred = refine_garment(
+            pred,
+            sample.garment,
+            sample.garment_faces,
+            sample.body_target,
+            sample.body_faces,
+            fabric=sample_fabric(sample),
+            pinned=sample.pinned,
+            margin=collision_margin,
+        )
+    elif collision_margin is not None:
+        normals = cached_vertex_normals(sample.body_target, sample.body_faces)
+        pred = push_outside(pred, sample.body_target, normals, collision_margin)
+    pred[sample.pinned] = sample.prior[sample.pinned]  # a user's pins (waistbands, straps) follow the body
+    return pred
+
+
 class GarSim:
     """Drapes a garment from a canonical body onto a target body in one step.
 
@@ -220,27 +248,11 @@ class GarSim:
         return (sample.prior + transfer_barycentric(correction, to_full)).astype(np.float32)
 
     def predict(self, sample: Sample) -> np.ndarray:
-        """The model's garment for a prepared sample (the prior when there is no model)."""
+        """The model's garment for a prepared sample (the prior when there is no model), post-processed."""
+        if self.model is None and not self.refine:
+            return np.array(sample.prior, dtype=np.float32)
         pred = np.array(sample.prior, dtype=np.float32) if self.model is None else self._network(sample)
-        if self.refine and self.collision_margin is not None:
-            from garsim.model.inputs import sample_fabric
-            from garsim.refine import refine
-
-            pred = refine(
-                pred,
-                sample.garment,
-                sample.garment_faces,
-                sample.body_target,
-                sample.body_faces,
-                fabric=sample_fabric(sample),
-                pinned=sample.pinned,
-                margin=self.collision_margin,
-            )
-        elif self.model is not None and self.collision_margin is not None:
-            normals = cached_vertex_normals(sample.body_target, sample.body_faces)
-            pred = push_outside(pred, sample.body_target, normals, self.collision_margin)
-        pred[sample.pinned] = sample.prior[sample.pinned]  # a user's pins (waistbands, straps) follow the body
-        return pred
+        return postprocess(pred, sample, self.collision_margin, self.refine)
 
     @property
     def name(self) -> str:
@@ -317,7 +329,7 @@ class GarSim:
         ('z' or 'y') and ``units`` ('m', 'cm', 'mm') describe the input meshes; the output uses the same.
         """
         out = self.predict(make_sample(body_canonical, body_target, garment, fabric, pinned, up=up, units=units))
-        return from_internal(out, up, units).astype(np.float32) if (up, units) != ("z", "m") else out
+        return from_internal(out, up, units).astype(np.float32)
 
     def drape_sequence(
         self,
@@ -338,7 +350,7 @@ class GarSim:
         """
         bc, bf = as_mesh(body_canonical, "canonical body")
         g, gf = as_mesh(garment, "garment")
-        targets = list(body_targets) if not isinstance(body_targets, np.ndarray) else list(body_targets)
+        targets = list(body_targets)
         if not targets:
             raise ValueError("body_targets is empty: give at least one target body")
         frames = []

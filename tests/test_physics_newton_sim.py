@@ -149,7 +149,7 @@ def _segment(body, can, template, pinned, pose, frames):
     from garsim.bodies.poses import batched_matrices, interpolate_poses, stack_poses
 
     verts, transforms = body.pose_batch(batched_matrices(stack_poses(interpolate_poses(body.t_pose(), pose, frames))))
-    pins = np.stack([garment_prior(body, can, PosedBody(v, t), template)[pinned] for v, t in zip(verts, transforms)])
+    pins = np.stack([garment_prior(body, can, PosedBody(v, t), template[pinned]) for v, t in zip(verts, transforms)])
     return verts, pins
 
 
@@ -170,7 +170,7 @@ def test_settle_then_chained_poses_settle_at_each(anny_body, lowres_skirt):
     pose_b = {"upperleg01.R": np.array([-0.3, 0.0, 0.0])}
     verts, transforms = body.pose_batch(batched_matrices(stack_poses(interpolate_poses(pose_a, pose_b, 10))))
     pins_b = np.stack(
-        [garment_prior(body, can, PosedBody(v, t), template)[g.pinned] for v, t in zip(verts, transforms)]
+        [garment_prior(body, can, PosedBody(v, t), template[g.pinned]) for v, t in zip(verts, transforms)]
     )
     states, infos = simulate_poses(
         template, g.faces, g.pinned, [seg_a, verts], body.faces, [pins_a, pins_b], ["cotton"], cfg

@@ -11,11 +11,11 @@ from typing import Any
 
 import numpy as np
 
+from garsim.api import postprocess
 from garsim.data.sample import FABRICS, Sample
 from garsim.data.store import DatasetStore
 from garsim.eval.metrics import garment_metrics
-from garsim.geometry.mesh import vertex_normals
-from garsim.geometry.proximity import nearest_vertices, push_outside
+from garsim.geometry.proximity import nearest_vertices
 
 
 def _predict_all(model: Any, samples: list[Sample], batch: int = 16) -> list[np.ndarray]:
@@ -25,25 +25,6 @@ def _predict_all(model: Any, samples: list[Sample], batch: int = 16) -> list[np.
     for i in range(0, len(samples), batch):
         out.extend(model.predict(samples[i : i + batch]))
     return out
-
-
-def _pushed(preds: list[np.ndarray], samples: list[Sample], margin: float) -> list[np.ndarray]:
-    """The API's collision post-process applied to raw predictions."""
-    return [
-        push_outside(p, s.body_target, vertex_normals(s.body_target, s.body_faces), margin)
-        for p, s in zip(preds, samples)
-    ]
-
-
-def _refined(preds: list[np.ndarray], samples: list[Sample]) -> list[np.ndarray]:
-    """The API's physical refinement (``garsim.refine``) applied to predictions."""
-    from garsim.model.inputs import sample_fabric
-    from garsim.refine import refine
-
-    return [
-        refine(p, s.garment, s.garment_faces, s.body_target, s.body_faces, fabric=sample_fabric(s), pinned=s.pinned)
-        for p, s in zip(preds, samples)
-    ]
 
 
 def evaluate_split(
@@ -70,11 +51,13 @@ def evaluate_split(
     if model is not None:
         predictions["garsim"] = _predict_all(model, samples)
         if collision_margin is not None:
-            predictions["garsim+push"] = _pushed(predictions["garsim"], samples, collision_margin)
+            predictions["garsim+push"] = [
+                postprocess(p, s, collision_margin, refine=False) for p, s in zip(predictions["garsim"], samples)
+            ]
         if refine:
-            predictions["garsim+refine"] = _refined(predictions["garsim"], samples)
+            predictions["garsim+refine"] = [postprocess(p, s) for p, s in zip(predictions["garsim"], samples)]
     if refine:
-        predictions["prior+refine"] = _refined(predictions["prior"], samples)
+        predictions["prior+refine"] = [postprocess(p, s) for p, s in zip(predictions["prior"], samples)]
     for name in sorted(predictions, key=lambda k: (k in ("prior", "ground truth"), k)):
         preds = predictions[name]
         rows: dict[str, list[dict[str, float]]] = defaultdict(list)

@@ -369,7 +369,7 @@ def simulate_job(job: JobSpec, config: GenerateConfig) -> tuple[list[SequenceRec
         body_segs.append(verts)
         pin_segs.append(
             np.stack(
-                [garment_prior(body, canonical, PosedBody(v, t), template)[pins] for v, t in zip(verts, transforms)]
+                [garment_prior(body, canonical, PosedBody(v, t), template[pins]) for v, t in zip(verts, transforms)]
             )
         )
         targets.append(PosedBody(verts[-1], transforms[-1]))
