@@ -11,7 +11,7 @@ import torch
 from model_fixtures import make_samples
 
 from garsim.model.config import GarSimConfig
-from garsim.train.trainer import NonFiniteLossError, TrainConfig, Trainer
+from garsim.train.trainer import NonFiniteLossError, TrainConfig, Trainer, resolve_device
 
 SMALL = GarSimConfig(latent=32, edge_latent=16, mlp_hidden=32, num_steps=2)
 
@@ -168,3 +168,13 @@ def test_a_training_step_mixes_families_canonical_poses_and_fabric_values(tmp_pa
     assert all(np.isfinite(h["train_loss"]) for h in hist) and hist[-1]["train_loss"] < hist[0]["train_loss"]
     film = trainer.model.processor.film[0].weight
     assert film.abs().sum() > 0  # zero-initialised FiLM was trained by the fabric values
+
+
+def test_device_choice_is_checked():
+    assert resolve_device("cpu").type == "cpu"
+    assert resolve_device("auto").type == ("cuda" if torch.cuda.is_available() else "cpu")
+    with pytest.raises(ValueError, match="device must be"):
+        resolve_device("mps")
+    if not torch.cuda.is_available():
+        with pytest.raises(ValueError, match="CUDA is not available"):
+            resolve_device("cuda")

@@ -78,6 +78,7 @@ class TrainConfig:
     checkpoint_every: int = 1  # epochs
     max_steps_per_epoch: int | None = None  # for smoke tests
     threads: int = 1  # torch threads per process: more thrash (~30x slower) when the cores are shared
+    device: str = "cpu"  # "cpu" (the documented path), "cuda", "cuda:N", or "auto" (CUDA when present)
 
     def to_dict(self) -> dict[str, Any]:
         """Plain JSON dict."""
@@ -144,10 +145,24 @@ def _dist_info() -> tuple[int, int]:
     return 0, 1
 
 
-def init_distributed() -> tuple[int, int]:
-    """Join the process group when launched by torchrun (WORLD_SIZE > 1); gloo on CPU. Returns (rank, world)."""
+def resolve_device(name: str) -> torch.device:
+    """``TrainConfig.device`` -> a torch device: "auto" picks CUDA when present; absent CUDA is an error."""
+    if name == "auto":
+        name = "cuda" if torch.cuda.is_available() else "cpu"
+    device = torch.device(name)
+    if device.type == "cuda" and not torch.cuda.is_available():
+        raise ValueError(f"device {name!r} asked for but CUDA is not available here; use --device cpu")
+    if device.type not in ("cpu", "cuda"):
+        raise ValueError(f"device must be cpu, cuda, cuda:N or auto, got {name!r}")
+    return device
+
+
+def init_distributed(device: torch.device | None = None) -> tuple[int, int]:
+    """Join the process group when launched by torchrun (WORLD_SIZE > 1): gloo on CPU, NCCL on CUDA (one GPU
+    per local rank). Returns (rank, world)."""
     if int(os.environ.get("WORLD_SIZE", "1")) > 1 and dist.is_available() and not dist.is_initialized():
-        dist.init_process_group(backend="gloo")
+        cuda = device is not None and device.type == "cuda"
+        dist.init_process_group(backend="nccl" if cuda else "gloo")
     return _dist_info()
 
 
@@ -167,13 +182,17 @@ class Trainer:
         self.cfg = train_config
         self.model_config = model_config
         torch.set_num_threads(max(1, train_config.threads))
-        self.rank, self.world = init_distributed()
+        self.device = resolve_device(train_config.device)
+        self.rank, self.world = init_distributed(self.device)
+        if self.device.type == "cuda" and self.world > 1:
+            self.device = torch.device("cuda", int(os.environ.get("LOCAL_RANK", "0")))
         seed_everything(train_config.seed)
         self.model = GarSimModel(model_config)
         if init is not None:
             if init.config != model_config:
                 raise ValueError("init model has another config than model_config; pass init.config")
             self.model.load_state_dict(init.state_dict())
+        self.model.to(self.device)
         self.train_set = GraphDataset(train_samples, model_config, with_collision=True)
         self.val_set = GraphDataset(val_samples, model_config, with_collision=True) if val_samples is not None else None
         self.net: torch.nn.Module = self.model
@@ -226,7 +245,7 @@ class Trainer:
 
     def _check_finite(self, terms: dict[str, torch.Tensor], batch) -> None:
         bad = ~torch.isfinite(terms["total"].detach())
-        flag = torch.tensor([float(bad.any())])
+        flag = torch.tensor([float(bad.any())], device=self.device)
         if self.world > 1:
             dist.all_reduce(flag, op=dist.ReduceOp.MAX)
         if flag.item() > 0:
@@ -254,8 +273,11 @@ class Trainer:
             lr = self.lr_at(self.step)
             for g in self.optimizer.param_groups:
                 g["lr"] = lr
-            pred = self.net(batch)
-            loss, terms = garsim_loss(pred, batch, self.cfg.losses, use_collision=self.collision_on)
+            batch = batch.to(self.device)
+            pred, parts = self.net(batch, return_parts=True)
+            loss, terms = garsim_loss(
+                pred, batch, self.cfg.losses, use_collision=self.collision_on, direction=parts["direction"]
+            )
             self._check_finite(terms, batch)
             self.optimizer.zero_grad(set_to_none=True)
             loss.backward()
@@ -271,7 +293,7 @@ class Trainer:
                 bar.set_postfix(loss=f"{float(loss.detach()):.4g}", lr=f"{lr:.2e}")
         if bar is not None:
             bar.close()
-        stats = torch.tensor([sums["loss"], sums["l2"], float(count)], dtype=torch.float64)
+        stats = torch.tensor([sums["loss"], sums["l2"], float(count)], dtype=torch.float64, device=self.device)
         if self.world > 1:
             dist.all_reduce(stats)
         n = max(stats[2].item(), 1.0)
@@ -286,10 +308,10 @@ class Trainer:
             return {"val_err_mm": nan, "val_prior_mm": nan, "val_collision_pct": nan, "val_score": nan}
         self.model.eval()
         idx = list(range(self.rank, len(self.val_set), self.world))
-        sums = torch.zeros(4, dtype=torch.float64)
+        sums = torch.zeros(4, dtype=torch.float64, device=self.device)
         with torch.no_grad():
             for start in range(0, len(idx), self.cfg.batch_size):
-                batch = collate([self.val_set[i] for i in idx[start : start + self.cfg.batch_size]])
+                batch = collate([self.val_set[i] for i in idx[start : start + self.cfg.batch_size]]).to(self.device)
                 pred = self.model(batch)
                 sums[0] += per_graph_error_mm(pred, batch.target, batch).sum().item()
                 sums[1] += per_graph_error_mm(batch.prior, batch.target, batch).sum().item()
@@ -401,7 +423,7 @@ class Trainer:
                 f"checkpoint {d} was trained with another model config; use a new out_dir or the same config"
             )
         self.model.load_state_dict(loaded.state_dict())
-        tensors = load_file(str(d / "optimizer.safetensors"))
+        tensors = load_file(str(d / "optimizer.safetensors"), device=str(self.device))
         opt_state: dict[int, dict[str, Any]] = {}
         for key, val in tensors.items():
             if key.startswith("state."):
@@ -412,7 +434,7 @@ class Trainer:
             opt_state.setdefault(int(pid), {})[name] = val
         self.optimizer.load_state_dict({"state": opt_state, "param_groups": state["param_groups"]})
         if "rng.torch" in tensors:
-            torch.set_rng_state(tensors["rng.torch"])
+            torch.set_rng_state(tensors["rng.torch"].cpu())
         self.epoch = int(state["epoch"])
         self.step = int(state["step"])
         self.collision_on = bool(state["collision_on"])
