@@ -27,11 +27,64 @@ def _store(tmp_path):
 
 def test_evaluate_prior_error_is_the_known_offset(tmp_path):
     res = evaluate_split(None, _store(tmp_path), "test")
-    assert set(res) == {"prior", "ground truth"} and set(res["prior"]) == {"all", "skirt", "top"}
+    assert set(res) == {"prior", "nearest", "ground truth"} and set(res["prior"]) == {"all", "skirt", "top"}
     assert res["ground truth"]["all"]["euclidean_mm"] == 0.0
     assert abs(res["prior"]["all"]["euclidean_mm"] - 10.0) < 0.01
+    assert res["nearest"]["all"]["euclidean_mm"] == res["prior"]["all"]["euclidean_mm"]  # the body does not move
     assert res["prior"]["all"]["frames"] == 4 and res["prior"]["all"]["collision_pct"] == 0.0
-    assert "| prior | skirt | 2 | 10.00 |" in format_table(res)
+    # every vertex 5 cm out, but half the coarse patch's long edges dip into the sphere (midpoints down to r = 0.9986)
+    assert res["prior"]["all"]["inside_pct"] == 0.0 and res["prior"]["all"]["edge_crossing_pct"] == 50.0
+    assert "jitter_mm" not in res["prior"]["all"]  # settled poses, not an animation
+    table = format_table(res)
+    assert "| prior | skirt | 2 | 10.00 |" in table and "jitter" not in table
+
+
+def test_post_processed_rows_leave_out_what_their_post_process_enforces(tmp_path):
+    """A model 10 mm inside the sphere: every raw collision figure is 100%; the push-out's row has no DeePSD
+    count (it enforces it) but still the winding-number and HOOD counts, now 0."""
+
+    class Inside:
+        def predict(self, samples):
+            return [s.prior * 0.95 for s in samples]
+
+    res = evaluate_split(Inside(), _store(tmp_path), "test", name="shrunk")
+    raw, pushed = res["shrunk"]["all"], res["shrunk+push"]["all"]
+    assert raw["collision_pct"] == raw["hood_collision_pct"] == raw["inside_pct"] == 100.0
+    assert "collision_pct" not in pushed and pushed["inside_pct"] == pushed["hood_collision_pct"] == 0.0
+    assert list(res)[:2] == ["shrunk", "shrunk+push"]
+    assert "| shrunk+push | all | 4 |" in format_table(res) and " - |" in format_table(res)
+
+
+def test_jitter_of_an_animation_beside_the_truth(tmp_path):
+    """A dynamic sequence of 3 consecutive frames: the truth at +0, +0.5 and +2 mm along Z (second difference
+    1 mm/frame²), the prior standing still (0)."""
+    import trimesh
+
+    body = trimesh.creation.icosphere(subdivisions=2)
+    bv, bf = np.asarray(body.vertices, np.float32), np.asarray(body.faces)
+    patch = trimesh.creation.icosphere(subdivisions=1)
+    gv, gf = (np.asarray(patch.vertices) * 1.05).astype(np.float32), np.asarray(patch.faces)
+    shift = np.array([0.0, 0.0005, 0.002])[:, None, None] * np.array([0.0, 0.0, 1.0])
+    truth = (gv[None] + shift).astype(np.float32)
+    lv = GarmentLevel(gv, gf, np.zeros(len(gv), bool), gv[None].repeat(3, 0), truth)
+    rec = SequenceRecord(
+        "test-anim",
+        "test",
+        "skirt",
+        "silk",
+        bv,
+        bv[None].repeat(3, 0),
+        bf,
+        np.arange(3),
+        {"low": lv},
+        meta={"dynamic": [True] * 3},
+    )
+    store = DatasetStore(tmp_path)
+    store.append_manifest(store.write_sequence(rec))
+    res = evaluate_split(None, tmp_path, "test")
+    assert res["ground truth"]["all"]["jitter_mm"] == pytest.approx(1.0, abs=1e-3)  # float32 positions
+    assert res["prior"]["skirt"]["jitter_mm"] == 0.0 and res["prior"]["all"]["sequences"] == 1
+    assert "jitter (mm/frame²)" in format_table(res)
 
 
 def test_paired_fabric_agreement_of_an_oracle_and_of_a_reversed_model(tmp_path):

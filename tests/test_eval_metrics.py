@@ -1,7 +1,19 @@
 import numpy as np
+import pytest
 import trimesh
 
-from garsim.eval.metrics import collision_pct, euclidean_error_mm, garment_metrics, normal_consistency, smoothness
+from garsim.eval.metrics import (
+    collision_pct,
+    edge_crossing_pct,
+    edge_length_error_mm,
+    euclidean_error_mm,
+    garment_metrics,
+    hood_collision_pct,
+    inside_pct,
+    jitter_mm,
+    normal_consistency,
+    smoothness,
+)
 
 SQUARE = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], dtype=float)
 SQUARE_FACES = np.array([[0, 1, 2], [0, 2, 3]])
@@ -42,3 +54,64 @@ def test_garment_metrics_perfect_prediction():
     m = garment_metrics(g, g, sphere.faces, sphere.vertices, sphere.faces)
     assert m.euclidean_mm == 0.0 and m.collision_pct == 0.0
     assert 0.0 < m.normal_consistency < 0.1
+
+
+# A closed unit cube (corners at ±0.5) as the body: flat faces, so closest points and face normals are exact.
+CUBE = trimesh.creation.box(extents=(1.0, 1.0, 1.0))
+CUBE_V, CUBE_F = np.asarray(CUBE.vertices), np.asarray(CUBE.faces)
+# above the top face (outside), below it (inside), far above, above the bottom face from inside
+PROBES = np.array([[0.0, 0.0, 0.6], [0.0, 0.0, 0.4], [0.0, 0.0, 5.0], [0.0, 0.0, -0.4]])
+
+
+def test_hood_collision_uses_the_closest_face_where_deepsd_uses_the_nearest_corner():
+    """0.1 above the top face's centre: the closest point is (0, 0, 0.5) on a +Z face, (x - c)·n = 0.1 > 0, so
+    HOOD counts it outside; the nearest body vertex is a top corner (±0.5, ±0.5, 0.5), whose normal points out
+    diagonally: (x - b)·n ∝ -0.5 k_x - 0.5 k_y + 0.1 k_z < 0 (k: its incident triangles per side, 1 or 2), a
+    DeePSD collision. The other probes agree: 2 of 4 inside for HOOD (50%), 3 of 4 for DeePSD (75%)."""
+    assert hood_collision_pct(PROBES, CUBE_V, CUBE_F) == 50.0
+    assert collision_pct(PROBES, CUBE_V, CUBE_F) == 75.0
+    assert inside_pct(PROBES, CUBE_V, CUBE_F) == 50.0  # the winding number: (0, 0, 0.4) and (0, 0, -0.4)
+
+
+def test_edge_crossings_count_segments_that_meet_the_body():
+    """Edges (0, 1) through the cube with both ends outside, (0, 3) and (1, 3) into it from outside: 3 of 5."""
+    v = np.array([[-1.0, 0.0, 0.0], [1.0, 0.0, 0.0], [-1.0, 0.0, 3.0], [0.0, 0.0, 0.4]])
+    faces = np.array([[0, 1, 2], [0, 3, 1]])  # edges (0,1) (0,2) (1,2) (0,3) (1,3); (1,2) passes above the cube
+    assert np.isclose(edge_crossing_pct(v, faces, CUBE_V, CUBE_F), 60.0)
+    assert inside_pct(v, CUBE_V, CUBE_F) == 25.0  # only vertex 3: the vertex count misses edge (0, 1)
+
+
+def test_edge_length_error_of_a_uniform_stretch():
+    """Every edge 0.2% longer: mean |Δ| = 0.002 x mean length = 2 mm x (4 sides + √2 diagonal) / 5."""
+    assert np.isclose(edge_length_error_mm(SQUARE * 1.002, SQUARE, SQUARE_FACES), 2.0 * (4 + np.sqrt(2)) / 5)
+    assert edge_length_error_mm(SQUARE + 5.0, SQUARE, SQUARE_FACES) < 1e-9  # a rigid motion keeps every length
+
+
+def test_jitter_is_the_mean_second_difference():
+    """Vertex 0 accelerates (x = a t², second difference 2a = 2 mm), vertex 1 moves at constant speed (0)."""
+    t = np.arange(4, dtype=float)
+    frames = np.zeros((4, 2, 3))
+    frames[:, 0, 0] = 0.001 * t**2
+    frames[:, 1, 1] = 0.01 * t
+    assert np.isclose(jitter_mm(frames), 1.0)
+    with pytest.raises(ValueError, match="T >= 3"):
+        jitter_mm(frames[:2])
+
+
+def test_garment_metrics_reports_every_metric():
+    sphere = trimesh.creation.icosphere(subdivisions=2)
+    g = np.asarray(sphere.vertices) * 1.2
+    m = garment_metrics(g * 0.5, g, sphere.faces, sphere.vertices, sphere.faces).as_dict()
+    assert set(m) == {
+        "euclidean_mm",
+        "normal_consistency",
+        "smoothness",
+        "collision_pct",
+        "hood_collision_pct",
+        "inside_pct",
+        "edge_crossing_pct",
+        "edge_length_error_mm",
+    }
+    assert m["inside_pct"] == m["hood_collision_pct"] == m["collision_pct"] == 100.0  # shrunk to 0.6: all inside
+    assert m["edge_crossing_pct"] == 0.0  # inside, but no edge meets the surface
+    assert np.isclose(m["euclidean_mm"], 600.0) and m["edge_length_error_mm"] > 0

@@ -1,9 +1,21 @@
-"""The paper's four evaluation metrics (Sec. 4.3), in NumPy, per garment.
+"""Evaluation metrics (the paper's Sec. 4.3 and the issue's additions), in NumPy, per garment or sequence.
 
-- Euclidean error (mm): mean per-vertex distance to the ground truth.
-- Normal consistency (Eq. 5): mean over adjacent face pairs of 1 - cos(angle between normals).
-- Smoothness (Eq. 4): mean norm of the uniform Laplacian of the vertex positions (metres).
-- Collision (%): DeePSD's count: nearest body vertex, its normal, (x - b)·n < 0.
+With x the predicted garment (N, 3), x̄ the ground truth, E its unique mesh edges (i, j), and the target body:
+
+- Euclidean error (mm): 1000 · mean_i ‖x_i − x̄_i‖.
+- Normal consistency (Eq. 5): mean over adjacent face pairs (f, g) of 1 − n_f · n_g.
+- Smoothness (Eq. 4): mean_i ‖x_i − mean_{j ∈ N(i)} x_j‖ (the uniform Laplacian, metres).
+- Collision (%), DeePSD's count: 100 · share of i with (x_i − b_q) · n_q < 0, q the nearest body VERTEX and n_q
+  its area-weighted vertex normal.
+- HOOD collision (%): 100 · share of i with (x_i − c_i) · n_f < 0, c_i the closest point of the body surface
+  (point-to-triangle) and n_f the unit normal of the FACE it lies on.
+- Inside (%): 100 · share of i inside the body by the generalised winding number (> 0.5), the exact test.
+- Edge crossings (%): 100 · share of edges (i, j) whose segment x_i x_j meets the body surface (a hit of the
+  ray from x_i towards x_j within its length): an edge with one end inside, or a limb cutting the cloth
+  between two outside vertices, which no vertex metric sees. Same definition as ``../shared/external-eval``.
+- Edge-length error (mm): 1000 · mean_(i,j) | ‖x_i − x_j‖ − ‖x̄_i − x̄_j‖ |.
+- Jitter (mm/frame²), for a sequence of T ≥ 3 consecutive frames: 1000 · mean_{t, i} ‖x_i[t+1] − 2 x_i[t] + x_i[t−1]‖
+  (the mean vertex acceleration), to be read beside the ground truth's own.
 """
 
 from __future__ import annotations
@@ -12,8 +24,9 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
-from garsim.geometry.inside import collision_fraction
-from garsim.geometry.mesh import face_normals, face_pairs, uniform_laplacian, vertex_normals
+from garsim.geometry.inside import closest_on_mesh, collision_fraction, inside_mask, segment_hits
+from garsim.geometry.mesh import face_normals, face_pairs, uniform_laplacian, unique_edges, vertex_normals
+from garsim.physics.newton_sim import rest_edge_lengths
 
 
 @dataclass
@@ -22,6 +35,10 @@ class GarmentMetrics:
     normal_consistency: float
     smoothness: float
     collision_pct: float
+    hood_collision_pct: float
+    inside_pct: float
+    edge_crossing_pct: float
+    edge_length_error_mm: float
 
     def as_dict(self) -> dict[str, float]:
         return asdict(self)
@@ -45,17 +62,57 @@ def smoothness(vertices: np.ndarray, faces: np.ndarray) -> float:
 
 
 def collision_pct(vertices: np.ndarray, body_vertices: np.ndarray, body_faces: np.ndarray) -> float:
+    """DeePSD's collision %: nearest body vertex and its normal."""
     normals = vertex_normals(np.asarray(body_vertices, np.float64), body_faces)
     return 100.0 * collision_fraction(vertices, body_vertices, normals)
+
+
+def hood_collision_pct(vertices: np.ndarray, body_vertices: np.ndarray, body_faces: np.ndarray) -> float:
+    """HOOD's collision %: closest point on the body surface and the normal of its face."""
+    x = np.asarray(vertices, np.float64)
+    closest, face = closest_on_mesh(x, body_vertices, body_faces)
+    n = face_normals(np.asarray(body_vertices, np.float64), np.asarray(body_faces)[face])
+    return 100.0 * float(np.mean(np.einsum("ij,ij->i", x - closest, n) < 0.0))
+
+
+def inside_pct(vertices: np.ndarray, body_vertices: np.ndarray, body_faces: np.ndarray) -> float:
+    """Share of vertices inside the body by the winding number (%)."""
+    return 100.0 * float(np.mean(inside_mask(vertices, body_vertices, body_faces)))
+
+
+def edge_crossing_pct(
+    vertices: np.ndarray, faces: np.ndarray, body_vertices: np.ndarray, body_faces: np.ndarray
+) -> float:
+    """Share of garment edges whose segment meets the body surface (%)."""
+    e = unique_edges(faces)
+    x = np.asarray(vertices)
+    return 100.0 * float(np.mean(segment_hits(x[e[:, 0]], x[e[:, 1]], body_vertices, body_faces)))
+
+
+def edge_length_error_mm(pred: np.ndarray, truth: np.ndarray, faces: np.ndarray) -> float:
+    """Mean absolute difference of edge lengths, predicted vs true (mm)."""
+    return float(np.abs(rest_edge_lengths(pred, faces) - rest_edge_lengths(truth, faces)).mean() * 1000.0)
+
+
+def jitter_mm(frames: np.ndarray) -> float:
+    """Mean norm of the second difference over consecutive frames (T, N, 3), mm/frame²."""
+    x = np.asarray(frames, np.float64)
+    if x.ndim != 3 or len(x) < 3:
+        raise ValueError(f"jitter needs (T >= 3, N, 3) frames, got shape {x.shape}")
+    return float(np.linalg.norm(x[2:] - 2.0 * x[1:-1] + x[:-2], axis=2).mean() * 1000.0)
 
 
 def garment_metrics(
     pred: np.ndarray, truth: np.ndarray, faces: np.ndarray, body_vertices: np.ndarray, body_faces: np.ndarray
 ) -> GarmentMetrics:
-    """All four metrics of one predicted garment."""
+    """Every per-garment metric of one predicted garment."""
     return GarmentMetrics(
         euclidean_mm=euclidean_error_mm(pred, truth),
         normal_consistency=normal_consistency(pred, faces),
         smoothness=smoothness(pred, faces),
         collision_pct=collision_pct(pred, body_vertices, body_faces),
+        hood_collision_pct=hood_collision_pct(pred, body_vertices, body_faces),
+        inside_pct=inside_pct(pred, body_vertices, body_faces),
+        edge_crossing_pct=edge_crossing_pct(pred, faces, body_vertices, body_faces),
+        edge_length_error_mm=edge_length_error_mm(pred, truth, faces),
     )

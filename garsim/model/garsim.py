@@ -9,7 +9,7 @@ import logging
 import struct
 from collections.abc import Sequence
 from pathlib import Path
-from typing import Any
+from typing import Any, Self
 
 import numpy as np
 import torch
@@ -37,6 +37,8 @@ WEIGHTS_FILE = "model.safetensors"
 CONFIG_FILE = "config.json"
 CHECKSUM_KEY = "weights_sha256"
 """Top-level key of ``config.json`` holding the sha256 of ``model.safetensors`` (not a GarSimConfig field)."""
+MODEL_KEY = "model"
+"""Top-level key of ``config.json`` naming the model (``GraphModel.kind``) when it is not GarSim; absent: GarSim."""
 
 log = logging.getLogger(__name__)
 
@@ -102,8 +104,8 @@ def _check_config_types(d: dict[str, Any]) -> None:
             raise ValueError(f"{f.name} must be {t.replace('|', ' | ')}, got {v!r}")
 
 
-def _read_config(path: Path) -> tuple[GarSimConfig, str | None]:
-    """config.json -> (GarSimConfig, recorded weights sha256 or None); WeightsError when malformed."""
+def _read_config(path: Path) -> tuple[GarSimConfig, str | None, str]:
+    """config.json -> (GarSimConfig, recorded weights sha256 or None, model kind); WeightsError when malformed."""
     try:
         d = json.loads(path.read_text())
         if not isinstance(d, dict):
@@ -111,8 +113,9 @@ def _read_config(path: Path) -> tuple[GarSimConfig, str | None]:
         checksum = d.pop(CHECKSUM_KEY, None)
         if checksum is not None and not (isinstance(checksum, str) and len(checksum) == 64):
             raise ValueError(f"{CHECKSUM_KEY} must be a 64-digit hex string, got {checksum!r}")
+        kind = d.pop(MODEL_KEY, GraphModel.kind)
         _check_config_types(d)
-        return GarSimConfig.from_dict(d), checksum
+        return GarSimConfig.from_dict(d), checksum, kind
     except (OSError, UnicodeDecodeError, ValueError, TypeError) as exc:
         msg = str(exc).replace("\n", " ")
         raise WeightsError(f"{path}: malformed config ({type(exc).__name__}: {msg})") from None
@@ -126,52 +129,18 @@ def node_batch(data: Data) -> torch.Tensor:
     return b
 
 
-class GarSimModel(nn.Module):
-    """GarSim: predicts the garment on the target body from a GarmentGraph (or Batch)."""
+class GraphModel(nn.Module):
+    """Base of the models ``garsim.train`` trains: a GarSimConfig, graphs built from Samples by ``make_graph``
+    (``build_graph``'s signature), ``forward(data, return_parts)``, predict and safetensors save/load.
+    ``kind`` names the model in ``config.json`` (GarSim writes none)."""
+
+    kind = "garsim"
+    make_graph = staticmethod(build_graph)
 
     def __init__(self, config: GarSimConfig | None = None):
         super().__init__()
-        self.config = cfg = config or GarSimConfig()
-        self.geometry = GeometryEncoder(cfg)
-        self.semantic = BodySemanticEncoder(cfg)
-        self.garment_encoder = GarmentAwareEncoder(cfg, FABRIC_FEATURES)
-        self.body_encoder = BodyAwareEncoder(cfg)
-        self.node_encoder = NodeEncoder(cfg)
-        self.edge_encoder = EdgeEncoder(cfg)
-        self.processor = Processor(cfg)
-        self.decoder = Decoder(cfg)
+        self.config = config or GarSimConfig()
 
-    def forward(self, data: Data, return_parts: bool = False):
-        """Predicted garment vertices (N, 3) in world coordinates; with ``return_parts`` also a dict of
-        the body-frame displacement, direction and magnitude."""
-        batch = node_batch(data)
-        x_gar = self.geometry(data.gar_rel)
-        # body geometry at each soft anchor: the anchor weights' blend of the anchoring vertices' features
-        rows, slots = data.anchor_index[0], data.anchor_index[1]
-        enc = self.geometry(data.body_rel)
-        x_body = enc.new_zeros(data.num_nodes, enc.shape[1]).index_add_(
-            0, rows, enc.index_select(0, slots) * data.anchor_weight[:, None]
-        )
-        single = data.rot.shape[0] == 1
-        s = self.semantic(data.sem)
-        s = s.expand(batch.shape[0], -1) if single else s[batch]
-        chi = self.garment_encoder(x_gar, data.fabric, data.p, data.p_prior)
-        mu = self.body_encoder(x_body, data.delta, s)
-        eta = self.node_encoder(chi, mu)
-        pi = self.edge_encoder(data.edge_attr)
-        eta, _ = self.processor(eta, pi, data.edge_index, data.fabric)
-        vec, direction, magnitude = self.decoder(eta, data.fabric)
-        if single:  # R^T v for every row: body frame -> world
-            world = vec @ data.rot[0].to(vec.dtype)
-        else:
-            world = torch.einsum("nij,ni->nj", data.rot[batch], vec)
-        base = data.anchor if self.config.head == "position" else data.prior
-        pred = base + world
-        if return_parts:
-            return pred, {"displacement": vec, "direction": direction, "magnitude": magnitude}
-        return pred
-
-    # -- convenience ------------------------------------------------------------------------
     def predict(self, sample: Sample | Sequence[Sample]) -> np.ndarray | list[np.ndarray]:
         """Sample(s) in memory -> predicted garment vertices (float32 numpy), graph built here."""
         was_training = self.training
@@ -180,8 +149,8 @@ class GarSimModel(nn.Module):
         try:
             with torch.inference_mode():
                 if isinstance(sample, Sample):
-                    return self(build_graph(sample, self.config, loss_inputs=False)).numpy()
-                graphs = [build_graph(s, self.config, loss_inputs=False) for s in sample]
+                    return self(self.make_graph(sample, self.config, loss_inputs=False)).numpy()
+                graphs = [self.make_graph(s, self.config, loss_inputs=False) for s in sample]
                 batch = collate(graphs)
                 pred = self(batch)
                 return [t.numpy() for t in torch.split(pred, [g.num_nodes for g in graphs])]
@@ -201,13 +170,15 @@ class GarSimModel(nn.Module):
         state = {k: v.detach().contiguous().cpu() for k, v in self.state_dict().items()}
         atomic_write(d / WEIGHTS_FILE, lambda p: save_file(state, str(p), metadata={"format": "garsim"}))
         config = {**self.config.to_dict(), CHECKSUM_KEY: _sha256(d / WEIGHTS_FILE)}
+        if self.kind != GraphModel.kind:
+            config[MODEL_KEY] = self.kind
         text = json.dumps(config, indent=2, sort_keys=True)
         atomic_write(d / CONFIG_FILE, lambda p: Path(p).write_text(text))
         return d
 
     @classmethod
-    def load(cls, directory: str | Path, map_location: str = "cpu") -> GarSimModel:
-        """Load a model saved by ``save`` (safetensors + JSON; nothing is unpickled).
+    def load(cls, directory: str | Path, map_location: str = "cpu") -> Self:
+        """Load a model of this class saved by ``save`` (safetensors + JSON; nothing is unpickled).
 
         Raises ``WeightsError`` (one line naming the file) when the weights fail their checksum, are
         truncated or corrupt, the config is malformed, or the weights do not fit the config. A config
@@ -215,8 +186,12 @@ class GarSimModel(nn.Module):
         d = Path(directory)
         wpath, cpath = d / WEIGHTS_FILE, d / CONFIG_FILE
         if not wpath.exists() or not cpath.exists():
-            raise FileNotFoundError(f"{d} must contain {WEIGHTS_FILE} and {CONFIG_FILE} (written by GarSimModel.save)")
-        config, expected = _read_config(cpath)
+            raise FileNotFoundError(
+                f"{d} must contain {WEIGHTS_FILE} and {CONFIG_FILE} (written by {cls.__name__}.save)"
+            )
+        config, expected, kind = _read_config(cpath)
+        if kind != cls.kind:
+            raise WeightsError(f"{cpath}: holds a {kind!r} model, not {cls.kind!r}; load it with that model's class")
         problem = _safetensors_problem(wpath)
         if expected is None:
             log.warning("%s has no %s (saved before checksums): %s is loaded unverified", cpath, CHECKSUM_KEY, wpath)
@@ -256,4 +231,60 @@ class GarSimModel(nn.Module):
         return model
 
 
-__all__ = ["CHECKSUM_KEY", "CONFIG_FILE", "WEIGHTS_FILE", "GarSimConfig", "GarSimModel", "WeightsError", "node_batch"]
+class GarSimModel(GraphModel):
+    """GarSim: predicts the garment on the target body from a GarmentGraph (or Batch)."""
+
+    def __init__(self, config: GarSimConfig | None = None):
+        super().__init__(config)
+        cfg = self.config
+        self.geometry = GeometryEncoder(cfg)
+        self.semantic = BodySemanticEncoder(cfg)
+        self.garment_encoder = GarmentAwareEncoder(cfg, FABRIC_FEATURES)
+        self.body_encoder = BodyAwareEncoder(cfg)
+        self.node_encoder = NodeEncoder(cfg)
+        self.edge_encoder = EdgeEncoder(cfg)
+        self.processor = Processor(cfg)
+        self.decoder = Decoder(cfg)
+
+    def forward(self, data: Data, return_parts: bool = False):
+        """Predicted garment vertices (N, 3) in world coordinates; with ``return_parts`` also a dict of
+        the body-frame displacement, direction and magnitude."""
+        batch = node_batch(data)
+        x_gar = self.geometry(data.gar_rel)
+        # body geometry at each soft anchor: the anchor weights' blend of the anchoring vertices' features
+        rows, slots = data.anchor_index[0], data.anchor_index[1]
+        enc = self.geometry(data.body_rel)
+        x_body = enc.new_zeros(data.num_nodes, enc.shape[1]).index_add_(
+            0, rows, enc.index_select(0, slots) * data.anchor_weight[:, None]
+        )
+        single = data.rot.shape[0] == 1
+        s = self.semantic(data.sem)
+        s = s.expand(batch.shape[0], -1) if single else s[batch]
+        chi = self.garment_encoder(x_gar, data.fabric, data.p, data.p_prior)
+        mu = self.body_encoder(x_body, data.delta, s)
+        eta = self.node_encoder(chi, mu)
+        pi = self.edge_encoder(data.edge_attr)
+        eta, _ = self.processor(eta, pi, data.edge_index, data.fabric)
+        vec, direction, magnitude = self.decoder(eta, data.fabric)
+        if single:  # R^T v for every row: body frame -> world
+            world = vec @ data.rot[0].to(vec.dtype)
+        else:
+            world = torch.einsum("nij,ni->nj", data.rot[batch], vec)
+        base = data.anchor if self.config.head == "position" else data.prior
+        pred = base + world
+        if return_parts:
+            return pred, {"displacement": vec, "direction": direction, "magnitude": magnitude}
+        return pred
+
+
+__all__ = [
+    "CHECKSUM_KEY",
+    "CONFIG_FILE",
+    "MODEL_KEY",
+    "WEIGHTS_FILE",
+    "GarSimConfig",
+    "GarSimModel",
+    "GraphModel",
+    "WeightsError",
+    "node_batch",
+]

@@ -15,7 +15,7 @@ import math
 import os
 import random
 import time
-from collections.abc import Iterable, Sequence
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
@@ -29,8 +29,9 @@ from torch.utils.data.distributed import DistributedSampler
 
 from garsim.atomic import atomic_write
 from garsim.data.sample import Sample
+from garsim.model.baselines import MODELS
 from garsim.model.config import GarSimConfig, check_known_keys
-from garsim.model.garsim import GarSimModel
+from garsim.model.garsim import GraphModel
 from garsim.model.inputs import GarmentGraph, build_graph, collate
 from garsim.train.losses import LossWeights, collision_fraction, garsim_loss, per_graph_error_mm
 
@@ -79,6 +80,7 @@ class TrainConfig:
     max_steps_per_epoch: int | None = None  # for smoke tests
     threads: int = 1  # torch threads per process: more thrash (~30x slower) when the cores are shared
     device: str = "cpu"  # "cpu" (the documented path), "cuda", "cuda:N", or "auto" (CUDA when present)
+    model: str = "garsim"  # a key of baselines.MODELS: "garsim", or "deepsd" (the DeePSD-style baseline)
 
     def to_dict(self) -> dict[str, Any]:
         """Plain JSON dict."""
@@ -103,7 +105,9 @@ class GraphDataset(Dataset):
         config: GarSimConfig,
         with_collision: bool = True,
         cache: bool = True,
+        make_graph: Callable[..., GarmentGraph] = build_graph,
     ):
+        """``make_graph``: the model's graph builder (``GraphModel.make_graph``, ``build_graph``'s signature)."""
         if not (hasattr(samples, "__len__") and hasattr(samples, "__getitem__")):
             samples = list(samples)
         if len(samples) == 0:
@@ -112,6 +116,7 @@ class GraphDataset(Dataset):
         self.config = config
         self.with_collision = with_collision
         self.cache = cache
+        self.make_graph = make_graph
         self._graphs: dict[int, GarmentGraph] = {}
 
     def __len__(self) -> int:
@@ -123,7 +128,7 @@ class GraphDataset(Dataset):
             s = self.samples[i]
             if s.target is None:
                 raise ValueError(f"sample {i} ({s.meta.get('name', '')}) has no target: training needs ground truth")
-            g = build_graph(
+            g = self.make_graph(
                 s, self.config, with_collision=self.with_collision, name=str(s.meta.get("name") or f"sample{i}")
             )
             if self.cache:
@@ -167,7 +172,8 @@ def init_distributed(device: torch.device | None = None) -> tuple[int, int]:
 
 
 class Trainer:
-    """Trains a GarSimModel on Samples; rank 0 writes checkpoints, the CSV log and the best model."""
+    """Trains a GarSimModel (or another ``baselines.MODELS`` entry) on Samples; rank 0 writes checkpoints, the
+    CSV log and the best model."""
 
     def __init__(
         self,
@@ -175,7 +181,7 @@ class Trainer:
         train_config: TrainConfig,
         train_samples: Sequence[Sample] | Iterable[Sample],
         val_samples: Sequence[Sample] | Iterable[Sample] | None = None,
-        init: GarSimModel | None = None,
+        init: GraphModel | None = None,
     ):
         """``init``: a trained model (same config) whose weights start the run; a checkpoint in
         ``out_dir`` still takes precedence when resuming."""
@@ -187,14 +193,23 @@ class Trainer:
         if self.device.type == "cuda" and self.world > 1:
             self.device = torch.device("cuda", int(os.environ.get("LOCAL_RANK", "0")))
         seed_everything(train_config.seed)
-        self.model = GarSimModel(model_config)
+        if train_config.model not in MODELS:
+            raise ValueError(f"unknown model {train_config.model!r}; choose one of {sorted(MODELS)}")
+        self.model = MODELS[train_config.model](model_config)
         if init is not None:
+            if type(init) is not type(self.model):
+                raise ValueError(f"init is a {type(init).__name__}, the run trains a {type(self.model).__name__}")
             if init.config != model_config:
                 raise ValueError("init model has another config than model_config; pass init.config")
             self.model.load_state_dict(init.state_dict())
         self.model.to(self.device)
-        self.train_set = GraphDataset(train_samples, model_config, with_collision=True)
-        self.val_set = GraphDataset(val_samples, model_config, with_collision=True) if val_samples is not None else None
+        make_graph = self.model.make_graph
+        self.train_set = GraphDataset(train_samples, model_config, with_collision=True, make_graph=make_graph)
+        self.val_set = (
+            GraphDataset(val_samples, model_config, with_collision=True, make_graph=make_graph)
+            if val_samples is not None
+            else None
+        )
         self.net: torch.nn.Module = self.model
         if self.world > 1:
             self.net = torch.nn.parallel.DistributedDataParallel(self.model)
@@ -417,7 +432,7 @@ class Trainer:
         """Resume from ``save_checkpoint`` output (no pickle involved)."""
         d = Path(directory)
         state = json.loads((d / "trainer_state.json").read_text())
-        loaded = GarSimModel.load(d)
+        loaded = type(self.model).load(d)
         if loaded.config != self.model_config:
             raise ValueError(
                 f"checkpoint {d} was trained with another model config; use a new out_dir or the same config"
