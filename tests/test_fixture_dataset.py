@@ -42,3 +42,10 @@ def test_fixture_holds_a_paired_group_ordered_like_real_fabrics():
     assert full, "the fixture needs one complete paired group"
     g = full[0]
     assert g["leather"] >= g["silk"] - 0.002, g
+
+
+def test_info_reads_a_store_with_only_the_low_level():
+    """The fixture keeps the decimated level only: ``data info`` reports its vertex range from it."""
+    info = DatasetStore(FIXTURE).info()
+    assert info["settled_samples"] == 15
+    assert 100 < info["vertices"]["min"] <= info["vertices"]["max"] < 1000

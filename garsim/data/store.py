@@ -330,7 +330,7 @@ class DatasetStore:
             }
             for fam in sorted(jobs)
         }
-        verts = [e["num_vertices"]["full"] for e in entries if "num_vertices" in e]
+        verts = [max(e["num_vertices"].values()) for e in entries if e.get("num_vertices")]  # the finest level stored
         phen = [e["phenotype"] for e in entries if "phenotype" in e]
         return {
             "root": str(self.root),
