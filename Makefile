@@ -3,7 +3,7 @@ PYTHON ?= python3
 VENV := .venv
 STAMP := $(VENV)/.installed
 
-.PHONY: setup demo lint test test-all
+.PHONY: setup demo lint test test-all results
 
 $(STAMP): pyproject.toml
 	test -d $(VENV) || $(PYTHON) -m venv $(VENV)
@@ -26,3 +26,18 @@ test: $(STAMP)
 
 test-all: $(STAMP)
 	$(VENV)/bin/python -m pytest -q -m ""
+
+# The results report (docs/results.md and its figures) from the dataset, a training run and the model:
+#   make results DATA=~/garsim-data/v2 RUN=~/garsim-runs/v1 MODEL=garsim/weights
+DATA ?= $(HOME)/garsim-data/v2
+RUN ?= $(HOME)/garsim-runs/v1
+MODEL ?= garsim/weights
+EXTERNAL := ../shared/external-eval/check.py
+results: $(STAMP)
+	$(VENV)/bin/garsim eval --data $(DATA) --model $(MODEL) --refine --out docs/results.json
+	if [ -f $(EXTERNAL) ]; then \
+	  $(VENV)/bin/python $(EXTERNAL) --model $(MODEL) --json docs/external_default.json && \
+	  $(VENV)/bin/python examples/external_check.py --model $(MODEL) --raw --json docs/external_raw.json; fi
+	$(VENV)/bin/garsim bench --model $(MODEL) --out docs/bench.json
+	$(VENV)/bin/python examples/make_report.py --run $(RUN) --model $(MODEL) --data $(DATA) \
+	  --results docs/results.json --external $(wildcard docs/external_default.json docs/external_raw.json)
