@@ -90,20 +90,30 @@ def from_internal(vertices: np.ndarray, up: str = "z", units: str = "m") -> np.n
     return v / UNITS[units]
 
 
-def check_scene(body: np.ndarray, garment: np.ndarray) -> None:
-    """Refuse a body that is plainly in another axis or unit, or a garment that does not surround it."""
+def check_scene(body: np.ndarray, garment: np.ndarray, up: str = "z", units: str = "m") -> None:
+    """Refuse a body that is plainly in another axis or unit, or a garment that does not surround it.
+
+    ``body`` and ``garment`` are in garsim's frame (metres, Z up), converted from the input's ``up`` and
+    ``units``; the message names the flag that fixes the input."""
     extent = body.max(axis=0) - body.min(axis=0)
     if extent[2] < 0.6 * extent.max():  # a T-pose's arm span may match its height; lying down it is far taller
         axis = "XYZ"[int(np.argmax(extent))]
+        if up == "y":
+            raise MeshError(
+                f"read as Y-up, the canonical body's longest axis is {axis}, not the vertical: the file looks "
+                "Z-up already; drop up='y' (CLI: --up z)"
+            )
         raise MeshError(
             f"the canonical body's longest axis is {axis}, not Z (up): for a Y-up file (Blender, glTF) "
             "pass up='y' (CLI: --up y)"
         )
     height = float(extent[2])
     if not (BODY_HEIGHT_RANGE[0] <= height <= BODY_HEIGHT_RANGE[1]):
-        hint = "cm" if 40 <= height <= 260 else "mm" if 400 <= height <= 2600 else None
+        raw = height / UNITS[units]  # in the file's own numbers
+        fits = [u for u, scale in UNITS.items() if BODY_HEIGHT_RANGE[0] <= raw * scale <= BODY_HEIGHT_RANGE[1]]
+        hint = fits[0] if fits else None
         fix = f"pass units='{hint}' (CLI: --units {hint})" if hint else "give the meshes in metres, cm or mm"
-        raise MeshError(f"the canonical body is {height:.3g} units tall, not a person in metres: {fix}")
+        raise MeshError(f"the canonical body is {raw:.3g} {units} tall (units='{units}'), not a person: {fix}")
     from garsim.geometry.proximity import cached_tree
 
     dist = cached_tree(body).query(garment)[0]
@@ -130,7 +140,7 @@ def make_sample(
     bt, bf_t = as_mesh(body_target, "target body")
     g, gf = as_mesh(garment, "garment")
     bc, bt, g = (to_internal(v, up, units).astype(np.float32) for v in (bc, bt, g))
-    check_scene(bc, g)
+    check_scene(bc, g, up=up, units=units)
     if bc.shape != bt.shape or bf.shape != bf_t.shape or not np.array_equal(bf, bf_t):
         raise MeshError(
             f"canonical body ({len(bc)} vertices, {len(bf)} faces) and target body ({len(bt)} vertices, "

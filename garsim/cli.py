@@ -1,16 +1,111 @@
-"""The ``garsim`` command line: thin wrappers that parse, call the library, and report."""
+"""The ``garsim`` command line: thin wrappers that parse, call the library, and report.
+
+Importing this module imports no numpy, torch or trimesh: ``garsim --help`` is instant, and the inference
+commands (drape, animate) pin numpy's and torch's thread pools to one thread before the libraries load (on a
+few shared cores, spinning up a thread pool for one small drape costs more than it saves; set
+``OMP_NUM_THREADS`` / ``OPENBLAS_NUM_THREADS`` to override). User errors end with one line on stderr that says
+what to fix and exit status 2; outputs are checked before any work.
+"""
 
 from __future__ import annotations
 
 import argparse
+import ast
 import json
 import logging
 import os
 import sys
+from functools import cache
 from pathlib import Path
 
 from garsim.atomic import atomic_write_bytes
-from garsim.data.sample import FABRICS
+
+FABRIC_CHOICES: tuple[str, ...] = ("silk", "cotton", "denim", "leather")
+"""The fabric presets (``garsim.data.sample.FABRICS``, repeated here so that parsing imports no numpy)."""
+MESH_OUTPUTS: tuple[str, ...] = (".obj", ".ply", ".glb", ".off", ".stl")
+"""What ``garsim drape --out`` writes (``garsim.geometry.io.save_mesh``)."""
+ANIMATION_OUTPUTS: tuple[str, ...] = (".glb", ".gltf", ".usd", ".usda", ".usdc", ".pc2", ".mp4", ".gif")
+"""What ``garsim animate --out`` writes (``garsim.export.SUPPORTED_EXTENSIONS``)."""
+SINGLE_THREAD_COMMANDS: tuple[str, ...] = ("drape", "animate")
+_THREAD_VARS = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")
+_USER_ERRORS = (ValueError, OSError, RuntimeError)
+"""Exceptions reported as one line (MeshError and ExportError are ValueErrors; a missing, unreadable or
+unwritable file an OSError); anything else is a bug and keeps its traceback."""
+
+
+class _HelpFormatter(argparse.RawDescriptionHelpFormatter):
+    """Keeps the examples' line breaks and appends each option's default (also the library's defaults of
+    options that leave them to a config class, read from its source without importing it)."""
+
+    def _get_help_string(self, action: argparse.Action) -> str:
+        text = action.help or ""
+        if "%(default)" in text or not action.option_strings or action.default is argparse.SUPPRESS:
+            return text
+        lazy = getattr(action, "config_default", None)
+        if action.default is None and lazy is not None:
+            value = dataclass_default(*lazy)
+            return text if value is None else f"{text} (default: {value})"
+        if action.default is None or action.default is False:
+            return text
+        default = action.default
+        if isinstance(default, (list, tuple)):
+            default = " ".join(str(x) for x in default) if action.nargs else "/".join(str(x) for x in default)
+        return f"{text} (default: {str(default).replace('%', '%%')})".strip()
+
+
+class _Parser(argparse.ArgumentParser):
+    """Usage errors are one line: what is wrong and where the help is."""
+
+    def __init__(self, *args, **kwargs) -> None:
+        kwargs.setdefault("formatter_class", _HelpFormatter)
+        super().__init__(*args, **kwargs)
+
+    def error(self, message: str) -> None:  # type: ignore[override]
+        self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
+
+
+@cache
+def dataclass_default(module: str, cls: str, name: str) -> str | None:
+    """The default of field ``name`` of dataclass ``cls`` in garsim module ``module``, read from the source
+    (importing the trainer or the generator would load torch or the simulator just to print the help)."""
+    path = Path(__file__).parent.joinpath(*module.split(".")[1:]).with_suffix(".py")
+    try:
+        tree = ast.parse(path.read_text(encoding="utf-8"))
+    except (OSError, SyntaxError):
+        return None
+    for node in tree.body:
+        if isinstance(node, ast.ClassDef) and node.name == cls:
+            for item in node.body:
+                if (
+                    isinstance(item, ast.AnnAssign)
+                    and isinstance(item.target, ast.Name)
+                    and item.target.id == name
+                    and item.value is not None
+                ):
+                    try:
+                        return repr(ast.literal_eval(item.value))
+                    except ValueError:
+                        return None
+    return None
+
+
+def _config_default(action: argparse.Action, module: str, cls: str, name: str) -> None:
+    action.config_default = (module, cls, name)  # type: ignore[attr-defined]
+
+
+def _check_output(path: str | os.PathLike, extensions: tuple[str, ...], flag: str) -> Path:
+    """Fail before any work when ``path`` has another extension or its folder cannot be written."""
+    from garsim.export._common import check_writable_folder
+
+    p = Path(path)
+    ext = p.suffix.lower()
+    if ext not in extensions:
+        got = repr(ext) if ext else "a file without an extension"
+        raise ValueError(f"{flag} {p}: cannot write {got}; use one of {', '.join(extensions)}")
+    if p.is_dir():
+        raise ValueError(f"{flag} {p} is a folder; give a file name ending in {', '.join(extensions)}")
+    check_writable_folder(p.parent, label=f"{flag} {p}")
+    return p
 
 
 def _shard(text: str) -> tuple[int, int]:
@@ -27,7 +122,18 @@ def _write_json(path: str | Path, obj: object) -> Path:
     return atomic_write_bytes(path, json.dumps(obj, indent=1).encode())
 
 
+def _check_folder(path: str | os.PathLike, flag: str = "--out") -> Path:
+    """Fail before any work when files cannot be written in the folder ``path`` (created later if missing)."""
+    from garsim.export._common import check_writable_folder
+
+    p = Path(path)
+    if p.exists() and not p.is_dir():
+        raise ValueError(f"{flag} {p} is a file; give a folder")
+    return check_writable_folder(p, label=f"{flag} {p}")
+
+
 def cmd_demo(args: argparse.Namespace) -> int:
+    _check_folder(args.out)
     from garsim.demo import DemoConfig, run_demo
 
     outputs = run_demo(
@@ -50,61 +156,124 @@ def cmd_view(args: argparse.Namespace) -> int:
 
 
 def cmd_drape(args: argparse.Namespace) -> int:
+    out = _check_output(args.out, MESH_OUTPUTS, "--out")  # outputs first: nothing is computed for a bad path
+    png = _check_output(args.png, (".png",), "--png") if args.png else None
     import numpy as np
 
-    from garsim.api import GarSim
+    from garsim.api import GarSim, from_internal, make_sample, to_internal
     from garsim.geometry.io import load_mesh, save_mesh
 
-    sim = GarSim.pretrained() if not args.prior_only else GarSim.prior_only()
-    garment = load_mesh(args.garment)
-    pinned = np.loadtxt(args.pinned, dtype=np.int64, ndmin=1) if args.pinned else None
-    verts = sim.drape(
-        args.canonical, args.target, garment, fabric=args.fabric, pinned=pinned, up=args.up, units=args.units
-    )
-    save_mesh(args.out, verts, garment[1], y_up=args.y_up)
-    print(args.out)
-    if args.png:
+    canonical, target, garment = (load_mesh(p) for p in (args.canonical, args.target, args.garment))
+    pinned = _read_pinned(args.pinned) if args.pinned else None
+    # GarSim.drape in two steps, so that bad meshes are refused before the model (and torch) loads
+    sample = make_sample(canonical, target, garment, args.fabric, pinned, up=args.up, units=args.units)
+    sim = GarSim.prior_only() if args.prior_only else GarSim.pretrained()
+    verts = from_internal(sim.predict(sample), args.up, args.units).astype(np.float32)
+    if png is not None:  # the render is the likelier of the two writes to fail: before the mesh
         from garsim.geometry.render import render_views
 
-        print(render_views(args.png, [load_mesh(args.target), (verts, garment[1])]))
+        body = (to_internal(target[0], args.up, args.units), target[1])
+        render_views(png, [body, (to_internal(verts, args.up, args.units), garment[1])])
+    # --y-up rotates a Z-up result for Blender/glTF; with --up y the result is already in the input's Y-up axis
+    save_mesh(out, verts, garment[1], y_up=args.y_up and args.up == "z")
+    print(out)
+    if png is not None:
+        print(png)
     return 0
 
 
-def cmd_animate(args: argparse.Namespace) -> int:
+def _read_pinned(path: str) -> object:
+    """Pinned garment vertex indices from a text file (whitespace- or newline-separated integers)."""
     import numpy as np
 
-    from garsim.api import GarSim
-    from garsim.export import SUPPORTED_EXTENSIONS, export_animation
-    from garsim.geometry.io import as_mesh, load_mesh
+    p = Path(path)
+    if not p.is_file():
+        raise ValueError(f"--pinned {p}: no such file (give a text file of garment vertex indices)")
+    try:
+        values = np.loadtxt(p, dtype=np.float64, ndmin=1).ravel()
+    except ValueError as exc:
+        first = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+        raise ValueError(f"--pinned {p}: not a list of integer vertex indices ({first})") from None
+    if not np.all(np.isfinite(values)) or not np.all(values == np.round(values)):
+        raise ValueError(f"--pinned {p}: vertex indices must be integers")
+    return values.astype(np.int64)
 
-    out = Path(args.out)
-    if out.suffix.lower() not in SUPPORTED_EXTENSIONS:  # checked before any work
+
+def _load_targets(src: Path, faces: object) -> list:
+    """Target body vertex arrays from a folder of OBJs or an .npz with 'vertices' (T, V, 3); every body must have
+    the canonical body's topology."""
+    import numpy as np
+
+    from garsim.geometry.io import MeshError, load_mesh
+
+    if src.is_dir():
+        files = sorted(src.glob("*.obj"))
+        if not files:
+            raise ValueError(f"--targets {src}: the folder has no .obj files")
+        targets = []
+        for path in files:
+            v, f = load_mesh(path)
+            if f.shape != faces.shape or not np.array_equal(f, faces):
+                raise MeshError(
+                    f"{path}: {len(v)} vertices, {len(f)} faces: every target body must have the canonical body's "
+                    f"topology ({len(faces)} faces); pose the same body mesh"
+                )
+            targets.append(v)
+        return targets
+    if not src.is_file():
+        raise ValueError(f"--targets {src}: no such file or folder")
+    if src.suffix.lower() != ".npz":
+        raise ValueError(f"--targets {src}: give a folder of body OBJs or an .npz with 'vertices' (T, V, 3)")
+    try:
+        with np.load(src, allow_pickle=False) as z:
+            if "vertices" not in z.files:
+                raise ValueError(
+                    f"--targets {src}: no array 'vertices' (has {', '.join(z.files) or 'none'}); "
+                    "store the target bodies as vertices (T, V, 3)"
+                )
+            targets = np.asarray(z["vertices"])
+    except ValueError:
+        raise
+    except Exception as exc:  # noqa: BLE001 - a truncated or foreign file raises zipfile/pickle/OS errors
+        raise ValueError(f"--targets {src}: not a readable .npz ({type(exc).__name__}: {exc})") from None
+    if targets.ndim != 3 or targets.shape[-1] != 3 or len(targets) == 0:
+        raise ValueError(f"--targets {src}: 'vertices' must have shape (T, V, 3) with T >= 1, got {targets.shape}")
+    return list(targets)
+
+
+def cmd_animate(args: argparse.Namespace) -> int:
+    out = _check_output(args.out, ANIMATION_OUTPUTS, "--out")  # checked before any work
+    if args.motion and (args.canonical or args.targets):
+        raise ValueError("give either --motion NAME or --canonical with --targets, not both")
+    if not args.motion and not (args.canonical and args.targets):
         raise ValueError(
-            f"cannot write {out.suffix or 'a file without extension'!r}; use one of {', '.join(SUPPORTED_EXTENSIONS)}"
+            "give --motion NAME (the default Anny body), or --canonical and --targets (a folder of "
+            "body OBJs or an .npz with an array 'vertices' of shape (T, V, 3))"
         )
+    if (args.motion and args.frames < 2) or args.fps <= 0:
+        raise ValueError(f"--frames must be >= 2 and --fps > 0, got {args.frames} and {args.fps}")
+    import numpy as np
+
+    from garsim.api import GarSim, fabric_fields
+    from garsim.export import export_animation
+    from garsim.geometry.io import load_mesh
+
+    fabric_fields(args.fabric)
     garment = load_mesh(args.garment)
     if args.motion:
-        from garsim.bodies.anny import AnnyBody
         from garsim.bodies.poses import batched_matrices, motion, stack_poses
+
+        sequence = motion(args.motion, args.frames)  # an unknown motion fails before Anny is built
+        from garsim.bodies.anny import AnnyBody
 
         body = AnnyBody()
         canonical = (body.canonical().vertices, body.faces)
-        targets = list(body.pose_batch(batched_matrices(stack_poses(motion(args.motion, args.frames))))[0])
+        targets = list(body.pose_batch(batched_matrices(stack_poses(sequence)))[0])
         faces = body.faces
     else:
-        if not (args.canonical and args.targets):
-            raise ValueError(
-                "give --motion NAME (the default Anny body), or --canonical and --targets (a folder of "
-                "body OBJs or an .npz with an array 'vertices' of shape (T, V, 3))"
-            )
-        canonical = as_mesh(args.canonical, "canonical body")
+        canonical = load_mesh(args.canonical)
         faces = canonical[1]
-        src = Path(args.targets)
-        if src.is_dir():
-            targets = [load_mesh(p)[0] for p in sorted(src.glob("*.obj"))]
-        else:
-            with np.load(src, allow_pickle=False) as z:
-                targets = list(z["vertices"])
+        targets = _load_targets(Path(args.targets), faces)
     sim = GarSim.prior_only() if args.prior_only else GarSim.pretrained()
     frames = sim.drape_sequence(canonical, targets, garment, fabric=args.fabric, progress=not args.quiet)
     written = export_animation(out, frames, garment[1], body_frames=np.stack(targets), body_faces=faces, fps=args.fps)
@@ -114,6 +283,7 @@ def cmd_animate(args: argparse.Namespace) -> int:
 
 
 def cmd_data_generate(args: argparse.Namespace) -> int:
+    _check_folder(args.out)
     from garsim.physics.generate import GenerateConfig, generate
 
     given = {
@@ -172,6 +342,7 @@ def cmd_data_verify(args: argparse.Namespace) -> int:
 
 
 def cmd_train(args: argparse.Namespace) -> int:
+    _check_folder(args.out)
     from garsim.model.config import GarSimConfig
     from garsim.model.garsim import GarSimModel
     from garsim.train.data import train_val_samples
@@ -208,6 +379,8 @@ def cmd_train(args: argparse.Namespace) -> int:
 
 
 def cmd_eval(args: argparse.Namespace) -> int:
+    if args.out:
+        _check_output(args.out, (".json",), "--out")
     from garsim.api import GarSim
     from garsim.eval.experiments import evaluate_split, format_table, paired_fabric_agreement
 
@@ -229,6 +402,8 @@ def cmd_eval(args: argparse.Namespace) -> int:
 
 
 def cmd_bench(args: argparse.Namespace) -> int:
+    if args.out:
+        _check_output(args.out, (".json",), "--out")
     from garsim.api import GarSim
     from garsim.eval.bench import bench_inference, bench_newton, format_bench
 
@@ -249,15 +424,44 @@ def cmd_bench(args: argparse.Namespace) -> int:
     return 0
 
 
-def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="garsim", description=__doc__)
-    parser.add_argument("-v", "--verbose", action="store_true", help="log at INFO level")
-    sub = parser.add_subparsers(dest="command", required=True)
+EXAMPLES: dict[str, str] = {
+    "garsim": "garsim drape --canonical a.obj --target b.obj --garment g.obj --out draped.obj",
+    "demo": "garsim demo --out demo_out",
+    "view": "garsim view demo_out/walk_dress.npz   # then open http://127.0.0.1:8080",
+    "drape": "garsim drape --canonical a.obj --target b.obj --garment g.obj --fabric silk --out draped.obj "
+    "--png draped.png\n  garsim drape --canonical a.glb --target b.glb --garment g.glb --up y --units cm "
+    "--out draped.glb",
+    "animate": "garsim animate --garment skirt.obj --motion walk --out walk.glb\n"
+    "  garsim animate --garment g.obj --canonical a.obj --targets bodies/ --out anim.usdc",
+    "train": "garsim train --data ~/garsim-data/v2 --out runs/v1 --resolution both",
+    "eval": "garsim eval --data ~/garsim-data/v2 --model runs/v1/best --out results.json",
+    "bench": "garsim bench --sizes 600 2400 --out bench.json",
+    "data": "garsim data info ~/garsim-data/v2",
+    "generate": "garsim data generate --out ~/garsim-data/v2 --seed 0 --workers 2",
+    "info": "garsim data info ~/garsim-data/v2 --json",
+    "verify": "garsim data verify ~/garsim-data/v2",
+}
+"""One example per command, shown at the end of its ``--help``."""
+MOTION_CHOICES: tuple[str, ...] = ("walk", "raise_arms", "turn", "sit_down")
+"""The motion library (``garsim.bodies.poses.MOTIONS``, repeated here so that parsing imports no torch)."""
 
-    p = sub.add_parser(
+
+def _epilog(name: str) -> str:
+    return "Example:\n  " + EXAMPLES[name]
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = _Parser(prog="garsim", description=__doc__.split("\n\n")[0], epilog=_epilog("garsim"))
+    parser.add_argument("-v", "--verbose", action="store_true", help="log at INFO level")
+    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+
+    def command(name: str, help_text: str, parent: argparse._SubParsersAction = sub) -> argparse.ArgumentParser:
+        return parent.add_parser(name, help=help_text, description=help_text, epilog=_epilog(name))
+
+    p = command(
         "demo",
-        help="drape six garment families on two body shapes in everyday poses; write OBJ, "
-        "a PNG grid, and a walk animation as GLB, USDC and GIF",
+        "drape six garment families on two body shapes in everyday poses; write OBJ, a PNG grid, and a walk "
+        "animation as GLB, USDC and GIF",
     )
     p.add_argument("--out", default="demo_out", help="output folder")
     p.add_argument("--seed", type=int, default=0, help="seed of the target poses")
@@ -270,11 +474,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--frames", type=int, default=24, help="frames of the walk animation")
     p.set_defaults(func=cmd_demo)
 
-    p = sub.add_parser(
-        "view",
-        help="interactive browser viewer of a drape or animation (needs garsim[view])",
-        epilog="example: garsim view demo_out/walk_dress.npz  (then open http://127.0.0.1:8080)",
-    )
+    p = command("view", "interactive browser viewer of a drape or animation (needs garsim[view])")
     p.add_argument(
         "path",
         help="a .glb/.gltf written by garsim, an .npz with 'frames' and 'faces' (optional "
@@ -284,47 +484,42 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--host", default="127.0.0.1", help="address to listen on (0.0.0.0: every interface)")
     p.set_defaults(func=cmd_view)
 
-    p = sub.add_parser("drape", help="drape a garment mesh from a canonical body onto a target body")
-    p.add_argument("--canonical", required=True, help="canonical body mesh (OBJ/PLY/GLB)")
+    p = command("drape", "drape a garment mesh from a canonical body onto a target body")
+    p.add_argument("--canonical", required=True, help="canonical body mesh (OBJ/PLY/GLB/OFF/STL)")
     p.add_argument("--target", required=True, help="target body mesh, same topology as --canonical")
     p.add_argument("--garment", required=True, help="garment mesh draped on the canonical body")
-    p.add_argument("--fabric", default="cotton", choices=FABRICS)
-    p.add_argument("--pinned", help="text file of pinned garment vertex indices (optional)")
-    p.add_argument("--out", required=True, help="output garment mesh path")
+    p.add_argument("--fabric", default="cotton", choices=FABRIC_CHOICES, help="fabric preset")
+    p.add_argument("--pinned", help="text file of garment vertex indices that follow the prior exactly")
+    p.add_argument("--out", required=True, help=f"output garment mesh ({', '.join(MESH_OUTPUTS)})")
     p.add_argument("--png", help="also render target body + draped garment to this PNG")
-    p.add_argument("--y-up", action="store_true", help="write the output Y-up (Blender/glTF)")
-    p.add_argument("--up", choices=("z", "y"), default="z", help="up axis of the input meshes (Blender/glTF: y)")
-    p.add_argument("--units", choices=("m", "cm", "mm"), default="m", help="length unit of the input meshes")
+    p.add_argument("--up", choices=("z", "y"), default="z", help="up axis of the input and output (Blender/glTF: y)")
+    p.add_argument("--units", choices=("m", "cm", "mm"), default="m", help="length unit of the input and output")
+    p.add_argument("--y-up", action="store_true", help="write a Z-up result Y-up (Blender/glTF); implied by --up y")
     p.add_argument("--prior-only", action="store_true", help="use the skinning prior, not the model")
     p.set_defaults(func=cmd_drape)
 
-    p = sub.add_parser(
-        "animate",
-        help="drape a garment over a pose sequence; write GLB, USD, PC2 (+OBJ), MP4 or GIF",
-        epilog="example: garsim animate --garment skirt.obj --motion walk --out walk.glb",
-    )
+    p = command("animate", "drape a garment over a pose sequence; write GLB, USD, PC2 (+OBJ), MP4 or GIF")
     p.add_argument("--garment", required=True, help="garment mesh draped on the canonical body")
-    p.add_argument(
-        "--motion", help="a motion of the library on the default Anny body: walk, raise_arms, turn, sit_down"
-    )
+    p.add_argument("--motion", choices=MOTION_CHOICES, help="a motion of the library, on the default Anny body")
     p.add_argument("--frames", type=int, default=30, help="frames of a --motion")
     p.add_argument("--canonical", help="canonical body mesh (with --targets)")
     p.add_argument("--targets", help="folder of target body OBJs (sorted by name) or an .npz with 'vertices' (T, V, 3)")
-    p.add_argument("--fabric", default="cotton", choices=FABRICS)
-    p.add_argument("--fps", type=float, default=30.0)
-    p.add_argument("--out", required=True, help="output file: .glb/.gltf, .usd/.usda/.usdc, .pc2, .mp4 or .gif")
+    p.add_argument("--fabric", default="cotton", choices=FABRIC_CHOICES, help="fabric preset")
+    p.add_argument("--fps", type=float, default=30.0, help="frames per second of the animation")
+    p.add_argument("--out", required=True, help=f"output file ({', '.join(ANIMATION_OUTPUTS)})")
     p.add_argument("--prior-only", action="store_true", help="use the skinning prior, not the model")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=cmd_animate)
 
-    p = sub.add_parser("train", help="train GarSim on a generated dataset (resumable; torchrun for DDP)")
+    p = command("train", "train GarSim on a generated dataset (resumable; torchrun for DDP)")
     p.add_argument("--data", required=True, help="dataset folder made by `garsim data generate`")
     p.add_argument("--out", required=True, help="run folder: checkpoints, CSV log, best model")
     # unset values take TrainConfig's / LossWeights' defaults (garsim/train), declared once there
-    p.add_argument("--epochs", type=int)
-    p.add_argument("--batch-size", type=int)
-    p.add_argument("--lr", type=float)
-    p.add_argument("--seed", type=int)
+    trainer = ("garsim.train.trainer", "TrainConfig")
+    _config_default(p.add_argument("--epochs", type=int, help="epochs"), *trainer, "epochs")
+    _config_default(p.add_argument("--batch-size", type=int, help="samples per batch"), *trainer, "batch_size")
+    _config_default(p.add_argument("--lr", type=float, help="peak learning rate (cosine decay)"), *trainer, "lr")
+    _config_default(p.add_argument("--seed", type=int, help="seed"), *trainer, "seed")
     p.add_argument(
         "--resolution",
         choices=("low", "full", "both"),
@@ -338,8 +533,15 @@ def build_parser() -> argparse.ArgumentParser:
         default=None,
         help="epoch that switches the collision loss on (default: when validation plateaus)",
     )
-    p.add_argument("--collision-weight", type=float, help="α_col of Eq. 7 (the paper: 1)")
-    p.add_argument("--collision-eps", type=float, help="ε of Eq. 6 in metres (margin kept off the body)")
+    losses = ("garsim.train.losses", "LossWeights")
+    _config_default(
+        p.add_argument("--collision-weight", type=float, help="α_col of Eq. 7 (the paper: 1)"), *losses, "col"
+    )
+    _config_default(
+        p.add_argument("--collision-eps", type=float, help="ε of Eq. 6 in metres (margin kept off the body)"),
+        *losses,
+        "eps",
+    )
     p.add_argument("--init", help="start from this trained model folder's weights (fine-tuning)")
     p.add_argument(
         "--head",
@@ -347,63 +549,90 @@ def build_parser() -> argparse.ArgumentParser:
         help="decoder head of a new model (default: GarSimConfig's, the paper's direction + magnitude)",
     )
     p.add_argument("--restart", action="store_true", help="ignore an existing checkpoint in --out")
-    p.add_argument("--threads", type=int, help="torch threads per process")
-    p.add_argument("--quiet", action="store_true")
+    _config_default(p.add_argument("--threads", type=int, help="torch threads per process"), *trainer, "threads")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=cmd_train)
 
-    p = sub.add_parser("eval", help="the paper's metrics on a dataset split: GarSim vs the LBS prior")
+    p = command("eval", "the paper's metrics on a dataset split: GarSim vs the LBS prior")
     p.add_argument("--data", required=True, help="dataset folder")
     p.add_argument("--model", help="a trained model folder (default: the shipped model)")
-    p.add_argument("--splits", nargs="+", default=["test", "ood"])
+    p.add_argument("--splits", nargs="+", default=["test", "ood"], help="dataset splits to score")
     p.add_argument("--refine", action="store_true", help="also score garsim+refine and prior+refine")
-    p.add_argument("--resolution", choices=("low", "full"), default="low")
-    p.add_argument("--out", help="write the results as JSON here")
+    p.add_argument("--resolution", choices=("low", "full"), default="low", help="mesh resolution scored")
+    p.add_argument("--out", help="write the results to this .json file")
     p.set_defaults(func=cmd_eval)
 
-    p = sub.add_parser("bench", help="end-to-end inference speed (one thread), optionally against Newton")
+    p = command("bench", "end-to-end inference speed (one thread), optionally against Newton")
     p.add_argument("--model", help="a trained model folder (default: the shipped model)")
     p.add_argument("--sizes", type=int, nargs="+", default=[600, 2400], help="garment vertex counts")
-    p.add_argument("--garment", default="skirt")
-    p.add_argument("--repeats", type=int, default=9)
+    p.add_argument("--garment", default="skirt", help="garment family timed")
+    p.add_argument("--repeats", type=int, default=9, help="timed repeats per size (the median is reported)")
     p.add_argument("--newton", action="store_true", help="also time the Newton simulation of the same drape")
-    p.add_argument("--out", help="write the timings as JSON here")
+    p.add_argument("--out", help="write the timings to this .json file")
     p.set_defaults(func=cmd_bench)
 
-    data = sub.add_parser("data", help="ground-truth datasets").add_subparsers(dest="data_command", required=True)
-    p = data.add_parser("generate", help="simulate a dataset with Newton (resumable)")
+    data = command("data", "ground-truth datasets: generate, info, verify").add_subparsers(
+        dest="data_command", required=True, metavar="SUBCOMMAND"
+    )
+    p = command("generate", "simulate a dataset with Newton (resumable)", data)
     p.add_argument("--out", required=True, help="dataset folder (outside the source tree)")
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--seed", type=int, default=0, help="seed of every job")
     # unset values take physics.generate.GenerateConfig's defaults (not imported here: the simulator stays off the
     # CLI's inference path; `garsim data generate` prints the settings it used in DIR/config.json)
-    p.add_argument("--train", type=int, help="training jobs (garment instances)")
-    p.add_argument("--test", type=int, help="test jobs: unseen instances, bodies, poses")
-    p.add_argument("--ood", type=int, help="out-of-distribution jobs: parameters outside every training range")
-    p.add_argument("--min-vertices", type=int, help="garment resolution, lower end")
-    p.add_argument("--max-vertices", type=int, help="garment resolution, upper end")
-    p.add_argument("--targets", type=int, help="chained target poses per job, each settled")
+    gen = ("garsim.physics.generate", "GenerateConfig")
+    _config_default(p.add_argument("--train", type=int, help="training jobs (garment instances)"), *gen, "num_train")
+    _config_default(
+        p.add_argument("--test", type=int, help="test jobs: unseen instances, bodies, poses"), *gen, "num_test"
+    )
+    _config_default(
+        p.add_argument("--ood", type=int, help="out-of-distribution jobs: parameters outside every training range"),
+        *gen,
+        "num_ood",
+    )
+    _config_default(
+        p.add_argument("--min-vertices", type=int, help="garment resolution, lower end"), *gen, "min_vertices"
+    )
+    _config_default(
+        p.add_argument("--max-vertices", type=int, help="garment resolution, upper end"), *gen, "max_vertices"
+    )
+    _config_default(
+        p.add_argument("--targets", type=int, help="chained target poses per job, each settled"),
+        *gen,
+        "targets_per_job",
+    )
     p.add_argument("--workers", type=int, default=2, help="parallel simulation processes")
     p.add_argument("--shard", type=_shard, default=(0, 1), help="K/N: run every N-th job from K")
     p.add_argument("--limit", type=int, help="stop after this many sequences (smoke runs)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=cmd_data_generate)
-    p = data.add_parser("info", help="counts per split / family / fabric / pose, acceptance, cost, ranges")
-    p.add_argument("dir")
+    p = command("info", "counts per split / family / fabric / pose, acceptance, cost, ranges", data)
+    p.add_argument("dir", help="dataset folder")
     p.add_argument("--json", action="store_true", help="print everything as JSON")
     p.set_defaults(func=cmd_data_info)
-    p = data.add_parser("verify", help="find missing, truncated or corrupt files")
-    p.add_argument("dir")
+    p = command("verify", "find missing, truncated or corrupt files", data)
+    p.add_argument("dir", help="dataset folder")
     p.set_defaults(func=cmd_data_verify)
     return parser
 
 
+def _one_line(exc: BaseException) -> str:
+    return " ".join(str(exc).split()) if str(exc).strip() else type(exc).__name__
+
+
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
+    if args.command in SINGLE_THREAD_COMMANDS:  # before numpy and torch load (see the module docstring)
+        for var in _THREAD_VARS:
+            os.environ.setdefault(var, "1")
     logging.basicConfig(level=logging.INFO if args.verbose else logging.WARNING, format="%(levelname)s %(message)s")
     try:
         return int(args.func(args) or 0)
-    except (ValueError, FileNotFoundError, RuntimeError) as exc:
-        print(f"garsim: error: {exc}", file=sys.stderr)
+    except _USER_ERRORS as exc:
+        print(f"garsim {args.command}: error: {_one_line(exc)}", file=sys.stderr)
         return 2
+    except KeyboardInterrupt:
+        print(f"garsim {args.command}: interrupted", file=sys.stderr)
+        return 130
 
 
 if __name__ == "__main__":

@@ -12,6 +12,7 @@ viser is an optional extra (``pip install 'garsim[view]'``), imported only by :f
 
 from __future__ import annotations
 
+import itertools
 import json
 import re
 import struct
@@ -514,3 +515,132 @@ def serve(path: str | Path, host: str = "127.0.0.1", port: int = 8080, block: bo
         finally:
             viewer.stop()
     return viewer
+
+
+BROWSERS: tuple[str, ...] = ("chromium", "chromium-browser", "google-chrome", "google-chrome-stable")
+"""Executables :func:`screenshot` looks for (``GARSIM_CHROMIUM`` names another)."""
+
+
+def find_browser() -> str | None:
+    """A headless-capable Chromium on this machine (``$GARSIM_CHROMIUM`` first), or None."""
+    import os
+    import shutil
+
+    for name in (os.environ.get("GARSIM_CHROMIUM"), *BROWSERS):
+        if name and (path := shutil.which(name)):
+            return path
+    return None
+
+
+_CDP_IDS = itertools.count(1)
+
+
+def _cdp(ws: Any, method: str, params: dict | None = None) -> dict:
+    """One DevTools protocol call: send, then skip events until its answer."""
+    call = next(_CDP_IDS)
+    ws.send(json.dumps({"id": call, "method": method, "params": params or {}}))
+    while True:
+        msg = json.loads(ws.recv())
+        if msg.get("id") == call:
+            if "error" in msg:
+                raise RuntimeError(f"{method}: {msg['error'].get('message', msg['error'])}")
+            return msg.get("result", {})
+
+
+def screenshot(
+    url: str,
+    path: str | Path,
+    width: int = 1280,
+    height: int = 800,
+    ready_text: str | None = "garment vertices",
+    settle: float = 3.0,
+    timeout: float = 120.0,
+    browser: str | None = None,
+) -> Path:
+    """Load ``url`` (a running viewer) in headless Chromium with software WebGL (SwiftShader), wait until the page
+    shows ``ready_text`` (viser's panel has arrived) and ``settle`` seconds more (meshes decoded and drawn), close
+    notifications, and write a ``width`` x ``height`` PNG to ``path``. Nothing is downloaded; without a Chromium
+    (``apt-get install chromium``) this raises :class:`ViewerUnavailable`. Driven through the DevTools protocol
+    with ``websockets`` (a viser dependency)."""
+    import base64
+    import os
+    import shutil
+    import socket
+    import subprocess
+    import tempfile
+    import urllib.request
+
+    from websockets.sync.client import connect
+
+    from garsim.atomic import atomic_write_bytes
+
+    exe = browser or find_browser()
+    if exe is None:
+        raise ViewerUnavailable(
+            "no Chromium found for the screenshot: apt-get install chromium (or set GARSIM_CHROMIUM)"
+        )
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    profile = tempfile.mkdtemp(prefix="garsim-chromium-")
+    args = [
+        exe,
+        "--headless=new",
+        f"--remote-debugging-port={port}",
+        f"--user-data-dir={profile}",
+        f"--window-size={width},{height}",
+        "--use-angle=swiftshader",
+        "--enable-unsafe-swiftshader",
+        "--hide-scrollbars",
+        "--no-first-run",
+        "--no-default-browser-check",
+        "--disable-extensions",
+        "--disable-background-networking",
+        "about:blank",
+    ]
+    if hasattr(os, "geteuid") and os.geteuid() == 0:
+        args.insert(1, "--no-sandbox")  # Chromium refuses to run as root with its sandbox
+    proc = subprocess.Popen(args, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    deadline = time.monotonic() + timeout
+    try:
+        ws_url = None
+        while ws_url is None:
+            if proc.poll() is not None or time.monotonic() > deadline:
+                raise RuntimeError(f"{exe} did not start its DevTools endpoint (exit status {proc.poll()})")
+            try:
+                with urllib.request.urlopen(f"http://127.0.0.1:{port}/json/list", timeout=2) as r:
+                    pages = [t for t in json.load(r) if t.get("type") == "page"]
+                ws_url = pages[0]["webSocketDebuggerUrl"] if pages else None
+            except OSError:
+                pass
+            if ws_url is None:
+                time.sleep(0.2)
+        with connect(ws_url, max_size=None, open_timeout=30) as ws:
+            _cdp(
+                ws,
+                "Emulation.setDeviceMetricsOverride",
+                {"width": width, "height": height, "deviceScaleFactor": 1, "mobile": False},
+            )
+            _cdp(ws, "Page.navigate", {"url": url})
+            check = f"document.body !== null && document.body.innerText.includes({json.dumps(ready_text or '')})"
+            while not _cdp(ws, "Runtime.evaluate", {"expression": check}).get("result", {}).get("value"):
+                if time.monotonic() > deadline:
+                    raise RuntimeError(f"{url} did not show {ready_text!r} within {timeout:.0f} s")
+                time.sleep(0.25)
+            time.sleep(settle)
+            close = (
+                "document.querySelectorAll('.mantine-Notification-closeButton, [class*=Notification] button')"
+                ".forEach(b => b.click())"
+            )
+            _cdp(ws, "Runtime.evaluate", {"expression": close})
+            time.sleep(0.5)
+            data = _cdp(ws, "Page.captureScreenshot", {"format": "png"})["data"]
+        return atomic_write_bytes(path, base64.b64decode(data))
+    finally:
+        proc.terminate()
+        try:
+            proc.wait(timeout=10)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.wait()
+        shutil.rmtree(profile, ignore_errors=True)

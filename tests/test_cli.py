@@ -145,3 +145,328 @@ def test_animate_writes_an_animation_matching_single_drapes(tmp_path, anny_body)
     np.testing.assert_allclose(frames[-1], last, atol=1e-5)
     assert main(["animate", "--garment", str(path), "--motion", "walk", "--out", str(tmp_path / "a.fbx")]) != 0
     assert not (tmp_path / "a.fbx").exists()
+
+
+# --- every command's --help: defaults and an example ---------------------------------------------------------------
+
+
+def _commands(parser=None, prefix=()) -> list[tuple[str, ...]]:
+    """Every command path of the parser: (), ("drape",), ("data", "generate"), ..."""
+    import argparse
+
+    parser = parser or build_parser()
+    paths = [prefix]
+    for action in parser._actions:
+        if isinstance(action, argparse._SubParsersAction):
+            for name, sub in action.choices.items():
+                paths += _commands(sub, (*prefix, name))
+    return paths
+
+
+def test_every_command_is_listed():
+    assert {" ".join(c) for c in _commands()} >= {"", "drape", "animate", "view", "demo", "data generate", "train"}
+
+
+@pytest.mark.parametrize("command", _commands(), ids=lambda c: " ".join(c) or "garsim")
+def test_help_shows_defaults_and_an_example(command):
+    """`garsim ... --help` through the installed entry point's module: exit 0, an example of this very command."""
+    import subprocess
+    import sys
+
+    r = subprocess.run(
+        [sys.executable, "-m", "garsim.cli", *command, "--help"], capture_output=True, text=True, timeout=60
+    )
+    assert r.returncode == 0, r.stderr
+    assert "Example:" in r.stdout
+    example = r.stdout.split("Example:", 1)[1]
+    assert "garsim " + " ".join(command) in example
+    if command in {("drape",), ("animate",), ("demo",), ("bench",), ("train",), ("data", "generate")}:
+        assert "(default: " in r.stdout
+
+
+def test_help_defaults_are_the_library_defaults(capsys):
+    """Options that leave their default to a config class show that class's value (read without importing it)."""
+    import dataclasses
+
+    from garsim.cli import dataclass_default
+    from garsim.train.losses import LossWeights
+    from garsim.train.trainer import TrainConfig
+
+    for cls in (TrainConfig, LossWeights):
+        module = cls.__module__
+        for f in dataclasses.fields(cls):
+            if f.default is not dataclasses.MISSING:
+                assert dataclass_default(module, cls.__name__, f.name) == repr(f.default), f.name
+    with pytest.raises(SystemExit):
+        main(["train", "--help"])
+    text = capsys.readouterr().out
+    assert f"(default: {TrainConfig().epochs})" in text and f"(default: {LossWeights().eps})" in text
+
+
+def test_cli_import_is_light():
+    """`garsim --help` and argument errors load neither numpy nor torch (and the drape path pins threads first)."""
+    import subprocess
+    import sys
+
+    code = "import sys, garsim.cli; sys.exit(any(m in sys.modules for m in ('numpy', 'torch', 'trimesh')))"
+    assert subprocess.run([sys.executable, "-c", code], timeout=60).returncode == 0
+
+
+def test_cli_choices_match_the_library():
+    from garsim.bodies.poses import MOTIONS
+    from garsim.cli import ANIMATION_OUTPUTS, FABRIC_CHOICES, MESH_OUTPUTS, MOTION_CHOICES
+    from garsim.data.sample import FABRICS
+    from garsim.export import SUPPORTED_EXTENSIONS
+    from garsim.geometry.io import SUPPORTED_EXTENSIONS as MESH_EXTENSIONS
+
+    assert FABRIC_CHOICES == FABRICS and MOTION_CHOICES == MOTIONS
+    assert set(ANIMATION_OUTPUTS) == set(SUPPORTED_EXTENSIONS)
+    assert set(MESH_OUTPUTS) == set(MESH_EXTENSIONS) - {".gltf"}
+
+
+# --- bad input: one line that says what to fix, exit status 2, no traceback, no output -----------------------------
+
+
+@pytest.fixture(scope="module")
+def scene(tmp_path_factory):
+    """A standing ellipsoid 'body' (1.7 m, Z up, metres), the same body moved, and a garment around its waist."""
+    folder = tmp_path_factory.mktemp("scene")
+    body = trimesh.creation.icosphere(subdivisions=3)
+    body.apply_scale([0.2, 0.15, 0.85])
+    body.apply_translation([0.0, 0.0, 0.85])
+    garment = trimesh.creation.icosphere(subdivisions=2)
+    garment.apply_scale([0.24, 0.19, 0.3])
+    garment.apply_translation([0.0, 0.0, 0.9])
+    moved = body.copy()
+    moved.apply_translation([0.0, 0.0, 0.1])
+    meshes = {"c": body, "t": moved, "g": garment}
+    for name, m in meshes.items():
+        m.export(folder / f"{name}.obj")
+    return folder, meshes
+
+
+def _write_obj(path, vertices, faces):
+    lines = [f"v {x} {y} {z}" for x, y, z in vertices] + [f"f {a + 1} {b + 1} {c + 1}" for a, b, c in faces]
+    path.write_text("\n".join(lines) + "\n")
+    return path
+
+
+def _bad_inputs(folder, meshes):
+    """name -> (files to write {name: writer}, argument changes, expected text in the message)."""
+    g = meshes["g"]
+    gv, gf = np.asarray(g.vertices), np.asarray(g.faces)
+    nan = gv.copy()
+    nan[3] = np.nan
+    oob = gf.copy()
+    oob[5, 1] = len(gv) + 7
+    text = (folder / "g.obj").read_text()
+    other = trimesh.creation.icosphere(subdivisions=2)
+    other.apply_scale([0.2, 0.15, 0.85])
+    other.apply_translation([0.0, 0.0, 0.95])
+    rot = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, -1.0, 0.0]])  # Z up -> Y up
+    return {
+        "missing mesh": ({}, {"--garment": "nothing.obj"}, "no such file"),
+        "empty mesh": ({"empty.obj": lambda p: p.write_text("")}, {"--garment": "empty.obj"}, "empty"),
+        "truncated mesh": (
+            {"cut.obj": lambda p: p.write_text(text[: text.rindex("\nf ") + 6])},
+            {"--garment": "cut.obj"},
+            "truncated",
+        ),
+        "unreadable mesh (a folder)": ({"dir.obj": lambda p: p.mkdir()}, {"--garment": "dir.obj"}, "directory"),
+        "unparseable mesh": (
+            {"junk.ply": lambda p: p.write_bytes(b"ply\nformat binary_little_endian 1.0\n\x00\x01garbage")},
+            {"--garment": "junk.ply"},
+            "junk.ply",
+        ),
+        "unknown mesh format": ({"g.fbx": lambda p: p.write_text("x")}, {"--garment": "g.fbx"}, "'.fbx'"),
+        "NaN vertex": ({"nan.obj": lambda p: _write_obj(p, nan, gf)}, {"--garment": "nan.obj"}, "NaN"),
+        "face out of range": (
+            {"oob.obj": lambda p: p.write_text(text + "f 1 2 999\n")},
+            {"--garment": "oob.obj"},
+            "vertices that do not exist",
+        ),
+        "bodies of different topologies": (
+            {"other.obj": lambda p: other.export(p)},
+            {"--target": "other.obj"},
+            "topology",
+        ),
+        "wrong axis": (
+            {f"{n}_y.obj": (lambda p, n=n: _write_obj(p, meshes[n].vertices @ rot.T, meshes[n].faces)) for n in "ctg"},
+            {"--canonical": "c_y.obj", "--target": "t_y.obj", "--garment": "g_y.obj"},
+            "--up y",
+        ),
+        "wrong unit": (
+            {f"{n}_cm.obj": (lambda p, n=n: _write_obj(p, meshes[n].vertices * 100, meshes[n].faces)) for n in "ctg"},
+            {"--canonical": "c_cm.obj", "--target": "t_cm.obj", "--garment": "g_cm.obj"},
+            "--units cm",
+        ),
+        "--up y on a Z-up file": ({}, {"--up": "y"}, "--up z"),
+        "--units cm on a metre file": ({}, {"--units": "cm"}, "--units m"),
+        "output checked before the inputs": ({}, {"--garment": "nothing.obj", "--out": "draped.fbx"}, "'.fbx'"),
+        "garment far from the body": (
+            {"far.obj": lambda p: _write_obj(p, gv + [2.0, 0.0, 0.0], gf)},
+            {"--garment": "far.obj"},
+            "from the canonical body",
+        ),
+        "unknown fabric": ({}, {"--fabric": "wool"}, "invalid choice: 'wool'"),
+        "pinned index out of range": (
+            {"pins.txt": lambda p: p.write_text("0 1 100000\n")},
+            {"--pinned": "pins.txt"},
+            "pinned indices",
+        ),
+        "pinned file not numbers": (
+            {"pins.txt": lambda p: p.write_text("waist\n")},
+            {"--pinned": "pins.txt"},
+            "--pinned",
+        ),
+        "unsupported output extension": ({}, {"--out": "out/draped.fbx"}, "'.fbx'"),
+        "output folder under a file": (
+            {"afile": lambda p: p.write_text("x")},
+            {"--out": "afile/draped.obj"},
+            "is a file",
+        ),
+        "output is a folder": ({"outdir.obj": lambda p: p.mkdir()}, {"--out": "outdir.obj"}, "is a folder"),
+        "png extension": ({}, {"--png": "out/draped.jpg"}, "--png"),
+    }
+
+
+def _rc(argv) -> int:
+    """main's exit status, also for argparse's usage errors (which exit)."""
+    try:
+        return main(argv)
+    except SystemExit as exc:
+        return int(exc.code)
+
+
+def _one_error_line(capsys) -> str:
+    err = capsys.readouterr().err
+    lines = [ln for ln in err.splitlines() if ln.strip()]
+    assert len(lines) == 1 and "Traceback" not in err, err
+    return lines[0]
+
+
+@pytest.mark.parametrize(
+    "case",
+    [
+        "missing mesh",
+        "empty mesh",
+        "truncated mesh",
+        "unreadable mesh (a folder)",
+        "unparseable mesh",
+        "unknown mesh format",
+        "NaN vertex",
+        "face out of range",
+        "bodies of different topologies",
+        "wrong axis",
+        "wrong unit",
+        "--up y on a Z-up file",
+        "--units cm on a metre file",
+        "output checked before the inputs",
+        "garment far from the body",
+        "unknown fabric",
+        "pinned index out of range",
+        "pinned file not numbers",
+        "unsupported output extension",
+        "output folder under a file",
+        "output is a folder",
+        "png extension",
+    ],
+)
+def test_drape_bad_input_is_one_line(case, scene, tmp_path, capsys, monkeypatch):
+    folder, meshes = scene
+    files, changes, expected = _bad_inputs(folder, meshes)[case]
+    monkeypatch.chdir(tmp_path)
+    for name, write in files.items():
+        write(tmp_path / name)
+    args = {
+        "--canonical": str(folder / "c.obj"),
+        "--target": str(folder / "t.obj"),
+        "--garment": str(folder / "g.obj"),
+        "--out": "out/draped.obj",
+        **changes,
+    }
+    before = set(tmp_path.rglob("*"))
+    assert _rc(["drape", "--prior-only", *[x for kv in args.items() for x in kv]]) == 2
+    assert expected in _one_error_line(capsys)
+    assert set(tmp_path.rglob("*")) == before  # no output, not even a folder
+
+
+@pytest.mark.parametrize(
+    "case, argv, expected",
+    [
+        ("unsupported output", ["--motion", "walk", "--out", "walk.fbx"], "'.fbx'"),
+        ("output under a file", ["--motion", "walk", "--out", "afile/walk.glb"], "is a file"),
+        ("unknown motion", ["--motion", "dance", "--out", "walk.glb"], "invalid choice: 'dance'"),
+        ("unknown fabric", ["--motion", "walk", "--fabric", "wool", "--out", "walk.glb"], "invalid choice: 'wool'"),
+        ("no bodies", ["--out", "walk.glb"], "--motion NAME"),
+        ("motion and bodies", ["--motion", "walk", "--canonical", "c.obj", "--out", "w.glb"], "not both"),
+        ("one frame", ["--motion", "walk", "--frames", "1", "--out", "walk.glb"], "--frames"),
+        ("missing targets", ["--canonical", "{c}", "--targets", "none/", "--out", "w.glb"], "no such file"),
+        ("empty targets folder", ["--canonical", "{c}", "--targets", "empty/", "--out", "w.glb"], "no .obj"),
+        ("targets of another topology", ["--canonical", "{c}", "--targets", "other/", "--out", "w.glb"], "topology"),
+        ("npz without vertices", ["--canonical", "{c}", "--targets", "bad.npz", "--out", "w.glb"], "'vertices'"),
+        ("truncated npz", ["--canonical", "{c}", "--targets", "cut.npz", "--out", "w.glb"], "not a readable .npz"),
+        ("targets of wrong shape", ["--canonical", "{c}", "--targets", "flat.npz", "--out", "w.glb"], "(T, V, 3)"),
+    ],
+)
+def test_animate_bad_input_is_one_line(case, argv, expected, scene, tmp_path, capsys, monkeypatch):
+    folder, meshes = scene
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "afile").write_text("x")
+    (tmp_path / "empty").mkdir()
+    (tmp_path / "other").mkdir()
+    trimesh.creation.icosphere(subdivisions=1).export(tmp_path / "other" / "0.obj")
+    np.savez(tmp_path / "bad.npz", frames=np.zeros((2, 3, 3)))
+    np.savez(tmp_path / "flat.npz", vertices=np.zeros((5, 3)))
+    (tmp_path / "cut.npz").write_bytes((tmp_path / "bad.npz").read_bytes()[:60])
+    before = set(tmp_path.rglob("*"))
+    argv = [a.format(c=folder / "c.obj") for a in argv]
+    assert _rc(["animate", "--garment", str(folder / "g.obj"), "--prior-only", "--quiet", *argv]) == 2
+    assert expected in _one_error_line(capsys)
+    assert set(tmp_path.rglob("*")) == before
+
+
+def test_animate_mesh_sequence_from_a_folder(scene, tmp_path, capsys):
+    """--canonical + --targets folder: the frames are the single drapes, in file-name order."""
+    from garsim import GarSim
+
+    folder, meshes = scene
+    bodies = tmp_path / "bodies"
+    bodies.mkdir()
+    c = np.asarray(meshes["c"].vertices)
+    faces = np.asarray(meshes["c"].faces)
+    for k in range(3):
+        _write_obj(bodies / f"{k:02d}.obj", c + [0.0, 0.05 * k, 0.0], faces)
+    out = tmp_path / "a.pc2"
+    argv = ["--canonical", str(folder / "c.obj"), "--targets", str(bodies), "--garment", str(folder / "g.obj")]
+    assert main(["animate", *argv, "--prior-only", "--quiet", "--out", str(out)]) == 0
+    from garsim.export import read_pc2
+
+    frames = read_pc2(out)[0]
+    g = meshes["g"]
+    last = GarSim.prior_only().drape((c, faces), (c + [0.0, 0.1, 0.0], faces), (g.vertices, g.faces))
+    assert frames.shape == (3, len(g.vertices), 3)
+    np.testing.assert_allclose(frames[-1], last, atol=1e-5)
+
+
+@pytest.mark.parametrize(
+    "argv, expected",
+    [
+        (["demo", "--out", "afile"], "is a file"),
+        (["train", "--data", "d", "--out", "afile"], "is a file"),
+        (["data", "generate", "--out", "afile/v2"], "is a file"),
+        (["eval", "--data", "d", "--out", "results.txt"], "'.txt'"),
+        (["bench", "--out", "afile/bench.json"], "is a file"),
+        (["view"], "required: path"),
+        (["drape", "--canonical", "a.obj"], "required"),
+        (["nonsense"], "invalid choice"),
+    ],
+)
+def test_output_and_usage_errors_come_first(argv, expected, tmp_path, capsys, monkeypatch):
+    """Unwritable outputs and usage errors are refused before any work: one line, exit status 2, nothing written."""
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "afile").write_text("x")
+    before = set(tmp_path.rglob("*"))
+    assert _rc(argv) == 2
+    assert expected in _one_error_line(capsys)
+    assert set(tmp_path.rglob("*")) == before

@@ -150,3 +150,25 @@ def test_missing_viser_is_one_line(npz, monkeypatch, capsys):
 def test_import_garsim_does_not_import_viser():
     code = "import sys, garsim, garsim.view, garsim.cli; sys.exit('viser' in sys.modules)"
     assert subprocess.run([sys.executable, "-c", code], timeout=120).returncode == 0
+
+
+def test_screenshot_shows_the_garment(npz, tmp_path):
+    """Headless Chromium (software WebGL) renders the served page: the garment's correction colours are on it."""
+    pytest.importorskip("viser")
+    from garsim.view import find_browser, screenshot, serve
+
+    if find_browser() is None:
+        pytest.skip("no Chromium installed (apt-get install chromium)")
+    viewer = serve(npz, host="127.0.0.1", port=_free_port(), block=False)
+    try:
+        png = screenshot(viewer.url, tmp_path / "view.png", width=960, height=640)
+    finally:
+        viewer.stop()
+    import matplotlib.image
+
+    rgb = matplotlib.image.imread(png)[..., :3]
+    assert rgb.shape == (640, 960, 3)
+    scene = rgb[:, : int(0.7 * 960)]  # left of viser's panel; the grid and the body are grey, the garment is not
+    scene = scene[: int(0.85 * 640)]  # above the axes gizmo in the bottom-left corner
+    coloured = (scene.max(axis=-1) - scene.min(axis=-1)) > 0.1
+    assert coloured.sum() > 2000, f"only {coloured.sum()} coloured pixels"

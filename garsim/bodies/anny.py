@@ -10,6 +10,7 @@ from functools import lru_cache
 import numpy as np
 import torch
 
+from garsim.bodies.anny_rig import anny_rig, match_anny_rig  # noqa: F401 - re-exported (cached on disk)
 from garsim.bodies.base import BodyModel, PosedBody
 from garsim.paths import anny_cache_dir
 
@@ -170,20 +171,3 @@ class AnnyBody(BodyModel):
                 b = max(sizes)
                 params = {k: v.expand(b, 4, 4) for k, v in params.items()}
         return self._model(pose_parameters=params, phenotype_kwargs=self.phenotype)
-
-
-@lru_cache(maxsize=len(FREE_TOPOLOGIES))
-def anny_rig(topology: str = "anny") -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
-    """(faces, skin_indices, skin_weights, num_bones) of an Anny topology (phenotype-independent)."""
-    body = AnnyBody(topology=topology)
-    return body.faces, body.skin_indices, body.skin_weights, len(body.bone_labels)
-
-
-def match_anny_rig(num_vertices: int, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray, int] | None:
-    """Skinning of the Anny topology that ``faces`` belongs to, or None for any other mesh."""
-    if num_vertices != 13718:  # the default 'anny' topology; others are not matched by vertex count
-        return None
-    rig_faces, indices, weights, num_bones = anny_rig("anny")
-    if faces.shape != rig_faces.shape or not np.array_equal(faces, rig_faces):
-        return None
-    return indices, weights, num_bones

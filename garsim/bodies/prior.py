@@ -95,7 +95,7 @@ def mesh_pair_prior(garment: np.ndarray, canonical: np.ndarray, target: np.ndarr
     Computed about the canonical body's centroid (float64), so moving the whole scene moves the prior with it
     exactly (the bone fit's damping pulls towards identity transforms, which is not translation invariant).
     """
-    from garsim.bodies.anny import match_anny_rig
+    from garsim.bodies.anny_rig import match_anny_rig
     from garsim.bodies.recover import recovered_lbs_prior
 
     centre = np.asarray(canonical, dtype=np.float64).mean(axis=0)

@@ -1,0 +1,93 @@
+"""Anny's skinning (faces, bone indices and weights), cached on disk so that matching a user's mesh pair
+against the Anny topology needs neither torch nor Anny's model build (~1-3 s per process otherwise).
+
+The rig is phenotype-independent: it is built once from ``AnnyBody`` and stored under the Anny cache folder
+(``$XDG_CACHE_HOME/garsim/anny/rig-<topology>-anny<version>.npz``), keyed by the installed Anny version.
+A missing, stale or unreadable cache file is rebuilt; nothing is downloaded.
+"""
+
+from __future__ import annotations
+
+import io
+import logging
+from functools import lru_cache
+from pathlib import Path
+
+import numpy as np
+
+ANNY_VERTICES = 13718
+"""Vertices of the default 'anny' topology (the only one matched by vertex count)."""
+
+log = logging.getLogger(__name__)
+
+
+def _anny_version() -> str:
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        return version("anny")
+    except PackageNotFoundError:  # pragma: no cover - anny is a dependency
+        return "unknown"
+
+
+def rig_cache_path(topology: str = "anny") -> Path:
+    """Where the rig of ``topology`` is cached for the installed Anny version."""
+    from garsim.paths import anny_cache_dir
+
+    return anny_cache_dir() / f"rig-{topology}-anny{_anny_version()}.npz"
+
+
+def _build(topology: str) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
+    from garsim.bodies.anny import AnnyBody
+
+    body = AnnyBody(topology=topology)
+    return body.faces, body.skin_indices, body.skin_weights, len(body.bone_labels)
+
+
+def _read(path: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray, int] | None:
+    try:
+        with np.load(path, allow_pickle=False) as z:
+            faces, indices, weights = z["faces"], z["skin_indices"], z["skin_weights"]
+            num_bones = int(z["num_bones"])
+    except Exception as exc:  # noqa: BLE001 - truncated (BadZipFile), foreign or partial file: rebuild it
+        log.info("rebuilding the Anny rig cache %s (%s)", path, exc)
+        return None
+    ok = (
+        faces.ndim == 2
+        and faces.shape[1] == 3
+        and indices.shape == weights.shape
+        and indices.ndim == 2
+        and (indices.size == 0 or 0 <= indices.min() <= indices.max() < num_bones)
+    )
+    return (faces.astype(np.int64), indices.astype(np.int64), weights.astype(np.float64), num_bones) if ok else None
+
+
+@lru_cache(maxsize=4)
+def anny_rig(topology: str = "anny") -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
+    """(faces, skin_indices, skin_weights, num_bones) of an Anny topology (phenotype-independent), from the
+    disk cache when present (built from ``AnnyBody`` and stored otherwise)."""
+    path = rig_cache_path(topology)
+    rig = _read(path) if path.exists() else None
+    if rig is not None:
+        return rig
+    rig = _build(topology)
+    faces, indices, weights, num_bones = rig
+    buf = io.BytesIO()
+    np.savez(buf, faces=faces, skin_indices=indices, skin_weights=weights, num_bones=np.int64(num_bones))
+    try:
+        from garsim.atomic import atomic_write_bytes
+
+        atomic_write_bytes(path, buf.getvalue())
+    except OSError as exc:  # a read-only cache still gives the rig, only slower next time
+        log.warning("could not cache the Anny rig at %s: %s", path, exc)
+    return rig
+
+
+def match_anny_rig(num_vertices: int, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray, int] | None:
+    """Skinning of the Anny topology that ``faces`` belongs to, or None for any other mesh."""
+    if num_vertices != ANNY_VERTICES:  # the default 'anny' topology; others are not matched by vertex count
+        return None
+    rig_faces, indices, weights, num_bones = anny_rig("anny")
+    if faces.shape != rig_faces.shape or not np.array_equal(faces, rig_faces):
+        return None
+    return indices, weights, num_bones

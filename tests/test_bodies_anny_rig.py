@@ -1,0 +1,51 @@
+"""The Anny rig cached on disk: the same skinning as the body model, rebuilt when damaged, and no torch to read it."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+
+import numpy as np
+
+from garsim.bodies import anny_rig as rig_module
+
+
+def test_cached_rig_is_the_body_models(anny_body, tmp_path, monkeypatch):
+    path = tmp_path / "rig.npz"
+    monkeypatch.setattr(rig_module, "rig_cache_path", lambda topology="anny": path)
+    rig_module.anny_rig.cache_clear()
+    try:
+        built = rig_module.anny_rig("anny")  # no file: built from AnnyBody and stored
+        assert path.is_file()
+        rig_module.anny_rig.cache_clear()
+        read = rig_module.anny_rig("anny")  # read back from the file
+        for a, b in zip(built, read):
+            np.testing.assert_array_equal(a, b)
+        faces, indices, weights, num_bones = read
+        np.testing.assert_array_equal(faces, anny_body.faces)
+        np.testing.assert_array_equal(indices, anny_body.skin_indices)
+        np.testing.assert_array_equal(weights, anny_body.skin_weights)
+        assert num_bones == len(anny_body.bone_labels)
+        assert rig_module.match_anny_rig(len(anny_body.rest_vertices), anny_body.faces)[2] == num_bones
+        assert rig_module.match_anny_rig(len(anny_body.rest_vertices), anny_body.faces[::-1]) is None
+        assert rig_module.match_anny_rig(100, anny_body.faces) is None
+
+        path.write_bytes(path.read_bytes()[:200])  # a damaged cache file is rebuilt, not an error
+        rig_module.anny_rig.cache_clear()
+        np.testing.assert_array_equal(rig_module.anny_rig("anny")[1], anny_body.skin_indices)
+        with np.load(path) as z:
+            assert z["skin_indices"].shape == anny_body.skin_indices.shape
+    finally:
+        rig_module.anny_rig.cache_clear()
+
+
+def test_mesh_pair_prior_needs_no_torch():
+    """Matching a mesh pair against the Anny rig (and the prior of any other mesh) loads neither torch nor Anny."""
+    code = (
+        "import sys, numpy as np, trimesh\n"
+        "from garsim.bodies.prior import mesh_pair_prior\n"
+        "b = trimesh.creation.icosphere(subdivisions=2); v, f = np.asarray(b.vertices), np.asarray(b.faces)\n"
+        "mesh_pair_prior(v * 1.1, v, v + 0.1, f)\n"
+        "sys.exit(any(m in sys.modules for m in ('torch', 'anny', 'warp')))\n"
+    )
+    assert subprocess.run([sys.executable, "-c", code], timeout=120).returncode == 0
