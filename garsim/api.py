@@ -288,10 +288,11 @@ class GarSim:
 
     @classmethod
     def load(cls, directory: str | Path, **options: Any) -> GarSim:
-        """A model saved by training (model.safetensors + config.json); ``options`` as ``GarSim(...)``."""
-        from garsim.model.garsim import GarSimModel
+        """A model saved by training (model.safetensors + config.json: GarSim or the DeePSD-style baseline);
+        ``options`` as ``GarSim(...)``."""
+        from garsim.model.baselines import load_model
 
-        return cls(model=GarSimModel.load(directory), **options)
+        return cls(model=load_model(directory), **options)
 
     @classmethod
     def default(cls) -> GarSim:

@@ -21,6 +21,7 @@ from pathlib import Path
 from garsim.atomic import atomic_write_bytes
 
 FABRIC_CHOICES: tuple[str, ...] = ("silk", "cotton", "denim", "leather")
+MODEL_CHOICES: tuple[str, ...] = ("garsim", "deepsd")
 """The fabric presets (``garsim.data.sample.FABRICS``, repeated here so that parsing imports no numpy)."""
 MESH_OUTPUTS: tuple[str, ...] = (".obj", ".ply", ".glb", ".off", ".stl")
 """What ``garsim drape --out`` writes (``garsim.geometry.io.save_mesh``)."""
@@ -343,22 +344,24 @@ def cmd_data_verify(args: argparse.Namespace) -> int:
 
 def cmd_train(args: argparse.Namespace) -> int:
     _check_folder(args.out)
+    from garsim.model.baselines import load_model
     from garsim.model.config import GarSimConfig
-    from garsim.model.garsim import GarSimModel
     from garsim.train.data import train_val_samples
     from garsim.train.losses import LossWeights
     from garsim.train.trainer import TrainConfig, Trainer
 
     train, val = train_val_samples(args.data, resolution=args.resolution, val_every=args.val_every)
-    init = GarSimModel.load(args.init) if args.init else None
+    init = load_model(args.init) if args.init else None
     given = {
         "epochs": args.epochs,
         "batch_size": args.batch_size,
         "lr": args.lr,
         "seed": args.seed,
         "threads": args.threads,
+        "model": init.kind if init is not None else args.model,
+        "device": args.device,
     }
-    losses = {"col": args.collision_weight, "eps": args.collision_eps}
+    losses = {"col": args.collision_weight, "eps": args.collision_eps, "dir": args.direction_weight}
     cfg = TrainConfig(
         out_dir=args.out,
         collision_start_epoch=args.collision_start,
@@ -383,14 +386,16 @@ def cmd_eval(args: argparse.Namespace) -> int:
         _check_output(args.out, (".json",), "--out")
     from garsim.api import GarSim
     from garsim.eval.experiments import evaluate_split, format_table, paired_fabric_agreement
+    from garsim.model.baselines import load_model
 
-    sim = GarSim.load(args.model) if args.model else GarSim.default()
-    report: dict = {"model": args.model or sim.name, "resolution": args.resolution}
+    model = load_model(args.model) if args.model else GarSim.default().model
+    report: dict = {"model": args.model or "shipped", "resolution": args.resolution}
+    name = model.kind if model is not None else "garsim"
     for split in args.splits:
-        report[split] = evaluate_split(sim.model, args.data, split, args.resolution, refine=args.refine)
+        report[split] = evaluate_split(model, args.data, split, args.resolution, refine=args.refine, name=name)
         print(f"## {split} split ({args.resolution} resolution)\n{format_table(report[split])}\n")
-    if sim.model is not None:
-        fab = paired_fabric_agreement(sim.model, args.data, resolution=args.resolution)
+    if model is not None:
+        fab = paired_fabric_agreement(model, args.data, resolution=args.resolution)
         report["paired_fabrics"] = fab
         print(
             f"paired-fabric groups (test): {fab['groups']}, ordering agreement {fab['ordering_agreement']} over "
@@ -547,6 +552,19 @@ def build_parser() -> argparse.ArgumentParser:
         "--head",
         choices=("direction_magnitude", "displacement", "position"),
         help="decoder head of a new model (default: GarSimConfig's, the paper's direction + magnitude)",
+    )
+    _config_default(
+        p.add_argument("--direction-weight", type=float, help="weight of the direction term (direction head only)"),
+        *losses,
+        "dir",
+    )
+    _config_default(
+        p.add_argument("--model", choices=MODEL_CHOICES, help="GarSim or the DeePSD-style baseline"), *trainer, "model"
+    )
+    _config_default(
+        p.add_argument("--device", help="cpu (the documented path), cuda, cuda:N or auto (CUDA when present)"),
+        *trainer,
+        "device",
     )
     p.add_argument("--restart", action="store_true", help="ignore an existing checkpoint in --out")
     _config_default(p.add_argument("--threads", type=int, help="torch threads per process"), *trainer, "threads")

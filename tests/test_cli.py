@@ -214,12 +214,13 @@ def test_cli_import_is_light():
 
 def test_cli_choices_match_the_library():
     from garsim.bodies.poses import MOTIONS
-    from garsim.cli import ANIMATION_OUTPUTS, FABRIC_CHOICES, MESH_OUTPUTS, MOTION_CHOICES
+    from garsim.cli import ANIMATION_OUTPUTS, FABRIC_CHOICES, MESH_OUTPUTS, MODEL_CHOICES, MOTION_CHOICES
     from garsim.data.sample import FABRICS
     from garsim.export import SUPPORTED_EXTENSIONS
     from garsim.geometry.io import SUPPORTED_EXTENSIONS as MESH_EXTENSIONS
+    from garsim.model.baselines import MODELS
 
-    assert FABRIC_CHOICES == FABRICS and MOTION_CHOICES == MOTIONS
+    assert FABRIC_CHOICES == FABRICS and MOTION_CHOICES == MOTIONS and set(MODEL_CHOICES) == set(MODELS)
     assert set(ANIMATION_OUTPUTS) == set(SUPPORTED_EXTENSIONS)
     assert set(MESH_OUTPUTS) == set(MESH_EXTENSIONS) - {".gltf"}
 
@@ -470,3 +471,17 @@ def test_output_and_usage_errors_come_first(argv, expected, tmp_path, capsys, mo
     assert _rc(argv) == 2
     assert expected in _one_error_line(capsys)
     assert set(tmp_path.rglob("*")) == before
+
+
+def test_train_and_eval_the_deepsd_baseline_from_the_cli(tmp_path, capsys):
+    """`garsim train --model deepsd` writes a model that `garsim eval` loads by its kind and scores beside the prior."""
+    from pathlib import Path
+
+    fixture = str(Path(__file__).parent / "fixtures" / "dataset_v2")
+    run = tmp_path / "run"
+    args = ["train", "--data", fixture, "--out", str(run), "--model", "deepsd", "--epochs", "1", "--val-every", "2"]
+    assert main([*args, "--device", "cpu", "--quiet"]) == 0
+    assert json.loads((run / "best" / "config.json").read_text())["model"] == "deepsd"
+    assert main(["eval", "--data", fixture, "--model", str(run / "best"), "--splits", "test"]) == 0
+    out = capsys.readouterr().out
+    assert "deepsd" in out and "prior" in out and "nearest" in out
