@@ -125,25 +125,28 @@ def test_collision_fraction_by_hand():
     np.testing.assert_allclose(collision_fraction(pred, data).numpy(), [0.5, 1.0])
 
 
-def test_direction_term_by_hand():
+def test_direction_and_magnitude_terms_by_hand():
     """Displacements r: v1 +0.3 z, v3 +0.4 x (v0, v2 do not move). Directions along r cost 0; v3's
-    direction orthogonal to r costs 0.4 (1 - 0) / 0.7; opposite costs 2 x 0.4 / 0.7; identity rotation."""
+    direction orthogonal to r costs 0.4 (1 - 0) / 0.7; opposite costs 2 x 0.4 / 0.7; identity rotation.
+    Magnitudes equal to |r| cost 0; v1's 0.1 too long adds 0.1 / 4 (mean over the four vertices)."""
     g = _graph()
     g.rot = torch.eye(3)[None]
     batch = torch.zeros(4, dtype=torch.long)
+    m = torch.tensor([0.0, 0.3, 0.0, 0.4])
     along = torch.tensor([[1.0, 0, 0], [0, 0, 1], [0, 1, 0], [1, 0, 0]])
-    assert direction_loss(along, g, batch, 1).item() == pytest.approx(0.0, abs=1e-7)
+    assert direction_loss(along, m, g, batch, 1).item() == pytest.approx(0.0, abs=1e-7)
     ortho = along.clone()
     ortho[3] = torch.tensor([0.0, 1, 0])
-    assert direction_loss(ortho, g, batch, 1).item() == pytest.approx(0.4 / 0.7)
+    assert direction_loss(ortho, m, g, batch, 1).item() == pytest.approx(0.4 / 0.7)
     opposite = along.clone()
     opposite[3] = -opposite[3]
-    assert direction_loss(opposite, g, batch, 1).item() == pytest.approx(0.8 / 0.7)
+    assert direction_loss(opposite, m, g, batch, 1).item() == pytest.approx(0.8 / 0.7)
+    longer = m + torch.tensor([0.0, 0.1, 0.0, 0.0])
+    assert direction_loss(along, longer, g, batch, 1).item() == pytest.approx(0.1 / 4)
     # the body frame: a 90° turn about z maps the world x displacement of v3 to body-frame y
     g.rot = torch.tensor([[[0.0, -1, 0], [1, 0, 0], [0, 0, 1]]])
-    assert direction_loss(ortho, g, batch, 1).item() == pytest.approx(0.0, abs=1e-7)
+    assert direction_loss(ortho, m, g, batch, 1).item() == pytest.approx(0.0, abs=1e-7)
     g.rot = torch.eye(3)[None]
-    _, terms = garsim_loss(g.target, g, LossWeights(dir=0.5), direction=opposite)
-    assert terms["total"].item() == pytest.approx(
-        0.5 * 0.8 / 0.7 + 0.01 * terms["sm"].item() + 1e-4 * terms["nc"].item()
-    )
+    _, terms = garsim_loss(g.target, g, LossWeights(dir=0.5), direction=opposite, magnitude=m)
+    expected = 0.5 * 0.8 / 0.7 + 0.01 * terms["sm"].item() + 1e-4 * terms["nc"].item()
+    assert terms["total"].item() == pytest.approx(expected)

@@ -291,7 +291,12 @@ class Trainer:
             batch = batch.to(self.device)
             pred, parts = self.net(batch, return_parts=True)
             loss, terms = garsim_loss(
-                pred, batch, self.cfg.losses, use_collision=self.collision_on, direction=parts["direction"]
+                pred,
+                batch,
+                self.cfg.losses,
+                use_collision=self.collision_on,
+                direction=parts["direction"],
+                magnitude=parts["magnitude"],
             )
             self._check_finite(terms, batch)
             self.optimizer.zero_grad(set_to_none=True)
