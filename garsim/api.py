@@ -16,7 +16,7 @@ from garsim.garments.garment import Garment
 from garsim.garments.remesh import BarycentricMap, barycentric_map, decimate, transfer_barycentric
 from garsim.geometry.cache import ContentCache, content_key
 from garsim.geometry.io import MeshError, as_mesh, y_up_to_z_up, z_up_to_y_up
-from garsim.geometry.mesh import cached_vertex_normals
+from garsim.geometry.mesh import cached_vertex_normals, top_border_loops
 from garsim.geometry.proximity import push_outside
 
 WEIGHTS_DIR = Path(__file__).parent / "weights"
@@ -37,6 +37,30 @@ def _pinned_mask(pinned: Any, n: int) -> np.ndarray:
     mask = np.zeros(n, dtype=bool)
     mask[idx] = True
     return mask
+
+
+_AUTO_PINS = ContentCache(8, scope="garment")
+
+
+def auto_pinned(garment: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """``pinned="auto"``: the (N,) mask of the garment's top border loops (waistband; neckline and straps of
+    garments hung from the shoulders; ``garsim.geometry.mesh.top_border_loops``), for a garment in garsim's frame
+    (metres, Z up) on the canonical body. A garment without a border (a closed surface) is refused."""
+
+    def compute() -> np.ndarray:
+        loops = top_border_loops(garment, faces)
+        if not loops:
+            raise MeshError(
+                "pinned='auto' found no border loop on the garment (a closed surface): give the pinned vertex "
+                "indices instead (CLI: --pinned FILE)"
+            )
+        mask = np.zeros(len(garment), dtype=bool)
+        mask[np.concatenate(loops)] = True
+        mask.setflags(write=False)
+        log.info("pinned='auto': %d vertices on %d top border loop(s)", int(mask.sum()), len(loops))
+        return mask
+
+    return _AUTO_PINS.get(content_key(np.asarray(garment), np.asarray(faces)), compute)
 
 
 def fabric_fields(fabric: Any) -> tuple[str, dict[str, float] | None]:
@@ -134,13 +158,20 @@ def make_sample(
     up: str = "z",
     units: str = "m",
 ) -> Sample:
-    """Validate user meshes (in ``up`` axis and ``units``) and build the model's input record (with the prior)."""
+    """Validate user meshes (in ``up`` axis and ``units``) and build the model's input record (with the prior).
+
+    ``pinned``: garment vertex indices, an (N,) boolean mask, ``"auto"`` (the top border loops, found in the
+    canonical body's frame: :func:`auto_pinned`) or None; pinned vertices follow the prior exactly."""
     fabric_name, fabric_values = fabric_fields(fabric)
     bc, bf = as_mesh(body_canonical, "canonical body")
     bt, bf_t = as_mesh(body_target, "target body")
     g, gf = as_mesh(garment, "garment")
     bc, bt, g = (to_internal(v, up, units).astype(np.float32) for v in (bc, bt, g))
     check_scene(bc, g, up=up, units=units)
+    if isinstance(pinned, str):
+        if pinned.strip().lower() != "auto":
+            raise ValueError(f"pinned must be 'auto', vertex indices or a boolean mask, got {pinned!r}")
+        pinned = auto_pinned(g, gf)
     if bc.shape != bt.shape or bf.shape != bf_t.shape or not np.array_equal(bf, bf_t):
         raise MeshError(
             f"canonical body ({len(bc)} vertices, {len(bf)} faces) and target body ({len(bt)} vertices, "
@@ -338,6 +369,8 @@ class GarSim:
         both bodies share one topology; ``garment`` is draped on ``body_canonical``. ``fabric`` is a
         preset name (silk, cotton, denim, leather), a ``Fabric`` or a dict of physical values. ``up``
         ('z' or 'y') and ``units`` ('m', 'cm', 'mm') describe the input meshes; the output uses the same.
+        ``pinned`` (indices, a mask, or ``"auto"``: the garment's top border loops) vertices follow the prior
+        exactly.
         """
         out = self.predict(make_sample(body_canonical, body_target, garment, fabric, pinned, up=up, units=units))
         return from_internal(out, up, units).astype(np.float32)

@@ -25,6 +25,8 @@ MODEL_CHOICES: tuple[str, ...] = ("garsim", "deepsd")
 """The fabric presets (``garsim.data.sample.FABRICS``, repeated here so that parsing imports no numpy)."""
 MESH_OUTPUTS: tuple[str, ...] = (".obj", ".ply", ".glb", ".off", ".stl")
 """What ``garsim drape --out`` writes (``garsim.geometry.io.save_mesh``)."""
+MESH_INPUTS: tuple[str, ...] = (".obj", ".ply", ".glb", ".gltf", ".off", ".stl")
+"""What ``garsim drape`` reads (``garsim.geometry.io.SUPPORTED_EXTENSIONS``)."""
 ANIMATION_OUTPUTS: tuple[str, ...] = (".glb", ".gltf", ".usd", ".usda", ".usdc", ".pc2", ".mp4", ".gif")
 """What ``garsim animate --out`` writes (``garsim.export.SUPPORTED_EXTENSIONS``)."""
 SINGLE_THREAD_COMMANDS: tuple[str, ...] = ("drape", "animate")
@@ -156,30 +158,108 @@ def cmd_view(args: argparse.Namespace) -> int:
     return 0
 
 
+def _drape_outputs(args: argparse.Namespace, batch: bool) -> tuple[Path | None, Path | None, str]:
+    """Check ``--out`` and ``--png`` before any work -> (out file or folder, png file or folder, output extension)."""
+    fmt = f".{args.format}" if args.format else None
+    if not batch:
+        out = _check_output(args.out, MESH_OUTPUTS, "--out")
+        if fmt and fmt != out.suffix.lower():
+            raise ValueError(f"--format {args.format} disagrees with --out {out}; drop --format or rename --out")
+        png = _check_output(args.png, (".png",), "--png") if args.png else None
+        return out, png, out.suffix.lower()
+    for flag, value in (("--out", args.out), ("--png", args.png)):
+        if value and not Path(value).is_dir() and Path(value).suffix.lower() in (*MESH_INPUTS, ".png"):
+            raise ValueError(
+                f"{flag} {value}: with several targets, give a folder (one file per target, named after it)"
+            )
+    out = _check_folder(args.out)
+    png = _check_folder(args.png, "--png") if args.png else None
+    ext = fmt or Path(args.garment).suffix.lower()
+    return out, png, ".glb" if ext == ".gltf" else ext if ext in MESH_OUTPUTS else ".obj"
+
+
+def _drape_targets(values: list[str]) -> list[Path]:
+    """The target meshes: each file given, and each folder's mesh files sorted by name."""
+    paths = []
+    for value in values:
+        p = Path(value)
+        if not p.is_dir():
+            paths.append(p)  # a missing or unreadable file is reported when it is read
+            continue
+        found = sorted(
+            (q for q in p.iterdir() if q.suffix.lower() in MESH_INPUTS and not q.name.startswith(".") and q.is_file()),
+            key=lambda q: q.name,
+        )
+        if not found:
+            raise ValueError(f"--target {p}: the folder has no mesh files ({', '.join(MESH_INPUTS)})")
+        paths += found
+    return paths
+
+
+def _same_file(a: Path, b: str | Path) -> bool:
+    try:
+        return a.resolve() == Path(b).resolve()
+    except (OSError, RuntimeError):
+        return False
+
+
 def cmd_drape(args: argparse.Namespace) -> int:
-    out = _check_output(args.out, MESH_OUTPUTS, "--out")  # outputs first: nothing is computed for a bad path
-    png = _check_output(args.png, (".png",), "--png") if args.png else None
+    batch = len(args.target) > 1 or any(Path(t).is_dir() for t in args.target)
+    out, png, ext = _drape_outputs(args, batch)  # outputs first: nothing is computed for a bad path
+    targets = _drape_targets(args.target)
+    if batch:
+        outs = [out / f"{t.stem}{ext}" for t in targets]
+        pngs = [png / f"{t.stem}.png" if png else None for t in targets]
+        seen: dict[Path, Path] = {}
+        for t, o in zip(targets, outs):
+            if o in seen:
+                raise ValueError(f"--target {seen[o]} and {t} would both be written to {o}: rename one")
+            seen[o] = t
+    else:
+        outs, pngs = [out], [png]
+    for o in outs:
+        for flag, given in [("--canonical", args.canonical), ("--garment", args.garment)] + [
+            ("--target", t) for t in targets
+        ]:
+            if _same_file(o, given):
+                raise ValueError(f"--out {o} would overwrite the input {flag} {given}; write elsewhere")
     import numpy as np
 
     from garsim.api import GarSim, from_internal, make_sample, to_internal
-    from garsim.geometry.io import load_mesh, save_mesh
+    from garsim.geometry.io import MeshError, load_mesh, load_mesh_with_attributes, save_mesh
 
-    canonical, target, garment = (load_mesh(p) for p in (args.canonical, args.target, args.garment))
-    pinned = _read_pinned(args.pinned) if args.pinned else None
-    # GarSim.drape in two steps, so that bad meshes are refused before the model (and torch) loads
-    sample = make_sample(canonical, target, garment, args.fabric, pinned, up=args.up, units=args.units)
+    canonical = load_mesh(args.canonical)
+    gv, gf, attributes = load_mesh_with_attributes(args.garment)  # UVs and normals go to the output
+    garment = (gv, gf)
+    bodies = []
+    for path in targets:  # every target is read and checked before the first drape
+        body = load_mesh(path)
+        if body[0].shape != canonical[0].shape or not np.array_equal(body[1], canonical[1]):
+            raise MeshError(
+                f"{path}: {len(body[0])} vertices, {len(body[1])} faces: the target body must have the canonical "
+                f"body's topology ({len(canonical[0])} vertices, {len(canonical[1])} faces); pose the same body mesh"
+            )
+        bodies.append(body)
+    pinned = "auto" if args.pinned == "auto" else _read_pinned(args.pinned) if args.pinned else None
+
+    def sample(body: tuple) -> object:
+        return make_sample(canonical, body, garment, args.fabric, pinned, up=args.up, units=args.units)
+
+    first = sample(bodies[0])  # bad meshes are refused before the model (and torch) loads
     sim = GarSim.prior_only() if args.prior_only else GarSim.pretrained()
-    verts = from_internal(sim.predict(sample), args.up, args.units).astype(np.float32)
-    if png is not None:  # the render is the likelier of the two writes to fail: before the mesh
-        from garsim.geometry.render import render_views
+    for k, (body, path, png_path) in enumerate(zip(bodies, outs, pngs)):
+        verts = from_internal(sim.predict(first if k == 0 else sample(body)), args.up, args.units).astype(np.float32)
+        if png_path is not None:  # the render is the likelier of the two writes to fail: before the mesh
+            from garsim.geometry.render import render_views
 
-        body = (to_internal(target[0], args.up, args.units), target[1])
-        render_views(png, [body, (to_internal(verts, args.up, args.units), garment[1])])
-    # --y-up rotates a Z-up result for Blender/glTF; with --up y the result is already in the input's Y-up axis
-    save_mesh(out, verts, garment[1], y_up=args.y_up and args.up == "z")
-    print(out)
-    if png is not None:
-        print(png)
+            shown = (to_internal(body[0], args.up, args.units), body[1])
+            render_views(png_path, [shown, (to_internal(verts, args.up, args.units), gf)])
+        # --y-up rotates a Z-up result for Blender/glTF; with --up y the result is already in the input's Y-up axis
+        attrs = None if attributes.empty else attributes.recompute_normals(verts, gf)
+        save_mesh(path, verts, gf, y_up=args.y_up and args.up == "z", attributes=attrs)
+        print(path)
+        if png_path is not None:
+            print(png_path)
     return 0
 
 
@@ -257,10 +337,17 @@ def cmd_animate(args: argparse.Namespace) -> int:
 
     from garsim.api import GarSim, fabric_fields
     from garsim.export import export_animation
-    from garsim.geometry.io import load_mesh
+    from garsim.geometry.io import load_mesh, load_mesh_with_attributes
 
     fabric_fields(args.fabric)
-    garment = load_mesh(args.garment)
+    gv, gf, attributes = load_mesh_with_attributes(args.garment)
+    garment = (gv, gf)
+    uvs = attributes.vertex_uvs(gf, len(gv))  # the animation formats store one UV per vertex
+    if uvs is None and attributes.uvs is not None:
+        logging.getLogger("garsim").warning(
+            "%s: the UVs have seams (a vertex with two UVs); animations store one per vertex, so they are dropped",
+            args.garment,
+        )
     if args.motion:
         from garsim.bodies.poses import batched_matrices, motion, stack_poses
 
@@ -277,7 +364,8 @@ def cmd_animate(args: argparse.Namespace) -> int:
         targets = _load_targets(Path(args.targets), faces)
     sim = GarSim.prior_only() if args.prior_only else GarSim.pretrained()
     frames = sim.drape_sequence(canonical, targets, garment, fabric=args.fabric, progress=not args.quiet)
-    written = export_animation(out, frames, garment[1], body_frames=np.stack(targets), body_faces=faces, fps=args.fps)
+    extra = {} if uvs is None else {"uvs": uvs}
+    written = export_animation(out, frames, gf, body_frames=np.stack(targets), body_faces=faces, fps=args.fps, **extra)
     for path in written:
         print(path)
     return 0
@@ -435,7 +523,7 @@ EXAMPLES: dict[str, str] = {
     "view": "garsim view demo_out/walk_dress.npz   # then open http://127.0.0.1:8080",
     "drape": "garsim drape --canonical a.obj --target b.obj --garment g.obj --fabric silk --out draped.obj "
     "--png draped.png\n  garsim drape --canonical a.glb --target b.glb --garment g.glb --up y --units cm "
-    "--out draped.glb",
+    "--out draped.glb\n  garsim drape --canonical a.obj --target bodies/ --garment g.obj --pinned auto --out draped/",
     "animate": "garsim animate --garment skirt.obj --motion walk --out walk.glb\n"
     "  garsim animate --garment g.obj --canonical a.obj --targets bodies/ --out anim.usdc",
     "train": "garsim train --data ~/garsim-data/v2 --out runs/v1 --resolution both",
@@ -489,14 +577,40 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--host", default="127.0.0.1", help="address to listen on (0.0.0.0: every interface)")
     p.set_defaults(func=cmd_view)
 
-    p = command("drape", "drape a garment mesh from a canonical body onto a target body")
+    p = command("drape", "drape a garment mesh from a canonical body onto a target body (or several: batch mode)")
     p.add_argument("--canonical", required=True, help="canonical body mesh (OBJ/PLY/GLB/OFF/STL)")
-    p.add_argument("--target", required=True, help="target body mesh, same topology as --canonical")
-    p.add_argument("--garment", required=True, help="garment mesh draped on the canonical body")
+    p.add_argument(
+        "--target",
+        required=True,
+        nargs="+",
+        metavar="TARGET",
+        help="target body mesh(es), same topology as --canonical; several files or a folder (its meshes sorted by "
+        "name) drape the garment on each, --out then being a folder",
+    )
+    p.add_argument(
+        "--garment",
+        required=True,
+        help="garment mesh draped on the canonical body; its UVs and normals (OBJ vt/vn, seams kept) go to the output",
+    )
     p.add_argument("--fabric", default="cotton", choices=FABRIC_CHOICES, help="fabric preset")
-    p.add_argument("--pinned", help="text file of garment vertex indices that follow the prior exactly")
-    p.add_argument("--out", required=True, help=f"output garment mesh ({', '.join(MESH_OUTPUTS)})")
-    p.add_argument("--png", help="also render target body + draped garment to this PNG")
+    p.add_argument(
+        "--pinned",
+        metavar="FILE|auto",
+        help="garment vertices that follow the prior exactly: a text file of vertex indices, or 'auto': the "
+        "garment's top border loop(s) on the canonical body (after --up/--units): the waistband of skirts and "
+        "trousers; the neckline (and the armholes of strapped tops) of garments hung from the shoulders",
+    )
+    p.add_argument(
+        "--out",
+        required=True,
+        help=f"output garment mesh ({', '.join(MESH_OUTPUTS)}); with several targets a folder of <target name>.<ext>",
+    )
+    p.add_argument(
+        "--format",
+        choices=[e[1:] for e in MESH_OUTPUTS],
+        help="file type of the outputs with several targets (default: the garment's, .gltf -> .glb)",
+    )
+    p.add_argument("--png", help="also render target body + draped garment to this PNG (with several targets: folder)")
     p.add_argument("--up", choices=("z", "y"), default="z", help="up axis of the input and output (Blender/glTF: y)")
     p.add_argument("--units", choices=("m", "cm", "mm"), default="m", help="length unit of the input and output")
     p.add_argument("--y-up", action="store_true", help="write a Z-up result Y-up (Blender/glTF); implied by --up y")

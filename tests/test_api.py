@@ -172,6 +172,38 @@ def test_pinned_vertices_follow_the_prior_and_sequences_match_single_drapes(anny
     np.testing.assert_allclose(seq[1], out, atol=1e-6)
 
 
+def test_pinned_auto_pins_the_top_border_loops_in_the_canonical_frame(anny_body, scene):
+    """pinned='auto': a skirt's waistband (the template's own pins), found after up/units; they follow the prior."""
+    from garsim.api import auto_pinned
+    from garsim.geometry.io import z_up_to_y_up
+    from garsim.model.config import GarSimConfig
+    from garsim.model.garsim import GarSimModel
+
+    c, t, g = scene
+    bodies = [(c.vertices, anny_body.faces), (t.vertices, anny_body.faces)]
+    mask = make_sample(*bodies, (g.vertices, g.faces), pinned="auto").pinned
+    np.testing.assert_array_equal(mask, g.pinned)  # the template pins its waist ring
+    np.testing.assert_array_equal(auto_pinned(g.vertices, g.faces), mask)
+
+    def blender(v):
+        return z_up_to_y_up(np.asarray(v, dtype=np.float64)) * 100.0
+
+    yup = [(blender(v), f) for v, f in bodies]
+    np.testing.assert_array_equal(
+        make_sample(*yup, (blender(g.vertices), g.faces), pinned="auto", up="y", units="cm").pinned, mask
+    )
+    sim = GarSim(GarSimModel(GarSimConfig(latent=16, edge_latent=8, mlp_hidden=16, num_steps=1)).eval())
+    out = sim.drape(*bodies, (g.vertices, g.faces), pinned="auto")
+    prior = GarSim.prior_only().drape(*bodies, (g.vertices, g.faces))
+    np.testing.assert_array_equal(out[mask], prior[mask])
+    assert np.abs(out[~mask] - prior[~mask]).max() > 1e-4  # the others are the model's
+    with pytest.raises(ValueError, match="'auto'"):
+        make_sample(*bodies, (g.vertices, g.faces), pinned="top")
+    sphere = trimesh.creation.icosphere(subdivisions=2)
+    with pytest.raises(MeshError, match="no border loop"):
+        make_sample(*bodies, (np.asarray(sphere.vertices) * 0.3 + c.vertices.mean(0), sphere.faces), pinned="auto")
+
+
 def test_refine_option_pushes_a_garment_out_of_the_body(anny_body, scene):
     """prior + refine (a baseline) on a skirt shrunk 3 cm towards the body: nothing stays inside it."""
     from garsim.geometry.inside import InsideTester

@@ -214,7 +214,7 @@ def test_cli_import_is_light():
 
 def test_cli_choices_match_the_library():
     from garsim.bodies.poses import MOTIONS
-    from garsim.cli import ANIMATION_OUTPUTS, FABRIC_CHOICES, MESH_OUTPUTS, MODEL_CHOICES, MOTION_CHOICES
+    from garsim.cli import ANIMATION_OUTPUTS, FABRIC_CHOICES, MESH_INPUTS, MESH_OUTPUTS, MODEL_CHOICES, MOTION_CHOICES
     from garsim.data.sample import FABRICS
     from garsim.export import SUPPORTED_EXTENSIONS
     from garsim.geometry.io import SUPPORTED_EXTENSIONS as MESH_EXTENSIONS
@@ -222,7 +222,7 @@ def test_cli_choices_match_the_library():
 
     assert FABRIC_CHOICES == FABRICS and MOTION_CHOICES == MOTIONS and set(MODEL_CHOICES) == set(MODELS)
     assert set(ANIMATION_OUTPUTS) == set(SUPPORTED_EXTENSIONS)
-    assert set(MESH_OUTPUTS) == set(MESH_EXTENSIONS) - {".gltf"}
+    assert set(MESH_OUTPUTS) == set(MESH_EXTENSIONS) - {".gltf"} and set(MESH_INPUTS) == set(MESH_EXTENSIONS)
 
 
 # --- bad input: one line that says what to fix, exit status 2, no traceback, no output -----------------------------
@@ -328,6 +328,13 @@ def _bad_inputs(folder, meshes):
         ),
         "output is a folder": ({"outdir.obj": lambda p: p.mkdir()}, {"--out": "outdir.obj"}, "is a folder"),
         "png extension": ({}, {"--png": "out/draped.jpg"}, "--png"),
+        "--pinned auto on a closed garment": ({}, {"--pinned": "auto"}, "no border loop"),
+        "--format disagrees with --out": ({}, {"--format": "glb"}, "--format glb disagrees"),
+        "output over an input": (
+            {"g2.obj": lambda p: p.write_text(text)},
+            {"--garment": "g2.obj", "--out": "g2.obj"},
+            "would overwrite the input",
+        ),
     }
 
 
@@ -371,6 +378,9 @@ def _one_error_line(capsys) -> str:
         "output folder under a file",
         "output is a folder",
         "png extension",
+        "--pinned auto on a closed garment",
+        "--format disagrees with --out",
+        "output over an input",
     ],
 )
 def test_drape_bad_input_is_one_line(case, scene, tmp_path, capsys, monkeypatch):
@@ -390,6 +400,130 @@ def test_drape_bad_input_is_one_line(case, scene, tmp_path, capsys, monkeypatch)
     assert _rc(["drape", "--prior-only", *[x for kv in args.items() for x in kv]]) == 2
     assert expected in _one_error_line(capsys)
     assert set(tmp_path.rglob("*")) == before  # no output, not even a folder
+
+
+def test_drape_keeps_uv_seams_and_vertex_order(scene, tmp_path):
+    """A garment OBJ with UV seams (more vt than v, f v/vt/vn) draped with --prior-only: the output has the draped
+    positions in the input's vertex order, the same vt list and the same face corner indices."""
+    from mesh_fixtures import obj_lists, seamed_obj_text
+
+    from garsim import GarSim
+
+    folder, meshes = scene
+    g = meshes["g"]
+    text, vt, _ = seamed_obj_text(np.asarray(g.vertices), np.asarray(g.faces))
+    (tmp_path / "g.obj").write_text(text)
+    out = tmp_path / "draped.obj"
+    argv = [
+        "--canonical",
+        str(folder / "c.obj"),
+        "--target",
+        str(folder / "t.obj"),
+        "--garment",
+        str(tmp_path / "g.obj"),
+    ]
+    assert main(["drape", *argv, "--prior-only", "--out", str(out)]) == 0
+    v, out_vt, out_f = obj_lists(out)
+    c, t = meshes["c"], meshes["t"]
+    expected = GarSim.prior_only().drape(c, t, (g.vertices, g.faces))
+    np.testing.assert_allclose(v, expected, atol=1e-6)
+    assert len(vt) > len(v)
+    np.testing.assert_array_equal(out_vt, vt)
+    in_f = [line.split()[1:] for line in text.splitlines() if line.startswith("f ")]
+    assert [[c.split("/")[:2] for c in face] for face in out_f] == [[c.split("/")[:2] for c in face] for face in in_f]
+    assert [[c.split("/")[2] for c in face] for face in out_f] == [[c.split("/")[2] for c in face] for face in in_f]
+
+
+def _bodies(folder, c, faces, names_shifts):
+    folder.mkdir(exist_ok=True)
+    for name, dz in names_shifts:
+        _write_obj(folder / name, c + [0.0, 0.0, dz], faces)
+    return folder
+
+
+def test_drape_batch_writes_one_output_per_target(scene, tmp_path, capsys):
+    """--target FOLDER (sorted by name) or several files, --out a folder: <target name>.<ext> per target, each the
+    single drape on that target; the garment's UVs go to every output; --format picks the type."""
+    from mesh_fixtures import obj_lists, seamed_obj_text
+
+    from garsim import GarSim
+
+    folder, meshes = scene
+    c, faces, g = np.asarray(meshes["c"].vertices), np.asarray(meshes["c"].faces), meshes["g"]
+    bodies = _bodies(tmp_path / "bodies", c, faces, [("b.obj", 0.05), ("a.obj", 0.1), ("c.obj", -0.05)])
+    (bodies / "notes.txt").write_text("not a mesh")
+    text, vt, _ = seamed_obj_text(np.asarray(g.vertices), np.asarray(g.faces), normals=False)
+    (tmp_path / "g.obj").write_text(text)
+    argv = ["drape", "--canonical", str(folder / "c.obj"), "--garment", str(tmp_path / "g.obj"), "--prior-only"]
+    out = tmp_path / "draped"
+    assert main([*argv, "--target", str(bodies), "--out", str(out), "--png", str(tmp_path / "png")]) == 0
+    printed = capsys.readouterr().out.split()
+    names = ["a", "b", "c"]
+    assert printed[0::2] == [str(out / f"{n}.obj") for n in names]
+    assert printed[1::2] == [str(tmp_path / "png" / f"{n}.png") for n in names]
+    sim = GarSim.prior_only()
+    for name, dz in zip(names, (0.1, 0.05, -0.05)):
+        v, out_vt, _ = obj_lists(out / f"{name}.obj")
+        np.testing.assert_allclose(v, sim.drape((c, faces), (c + [0, 0, dz], faces), (g.vertices, g.faces)), atol=1e-6)
+        np.testing.assert_array_equal(out_vt, vt)
+    out2 = tmp_path / "glb"
+    files = [str(bodies / "c.obj"), str(bodies / "a.obj")]
+    assert main([*argv, "--target", *files, "--format", "glb", "--out", str(out2)]) == 0
+    assert capsys.readouterr().out.split() == [str(out2 / "c.glb"), str(out2 / "a.glb")]  # in the order given
+    glb = trimesh.load(out2 / "c.glb", force="mesh", process=False)
+    np.testing.assert_allclose(glb.vertices, np.asarray(g.vertices) - [0, 0, 0.05], atol=1e-5)
+
+
+@pytest.mark.parametrize(
+    "case, argv, expected",
+    [
+        ("a target of another topology", ["--target", "bodies/", "--out", "draped/"], "topology"),
+        ("a missing target", ["--target", "bodies/a.obj", "none.obj", "--out", "draped/"], "no such file"),
+        ("--out a file name", ["--target", "good/", "--out", "draped.obj"], "give a folder"),
+        ("--out under a file", ["--target", "good/", "--out", "afile/draped"], "is a file"),
+        ("--png a file name", ["--target", "good/", "--out", "o/", "--png", "x.png"], "give a folder"),
+        ("two targets, one name", ["--target", "good/a.obj", "bodies/a.obj", "--out", "o/"], "rename one"),
+        ("no meshes in the folder", ["--target", "empty/", "--out", "o/"], "no mesh files"),
+        ("output over the targets", ["--target", "good/", "--out", "good/"], "would overwrite the input"),
+    ],
+)
+def test_drape_batch_bad_input_is_one_line(case, argv, expected, scene, tmp_path, capsys, monkeypatch):
+    """Every target is read and checked before the first drape: a bad one leaves nothing written."""
+    folder, meshes = scene
+    monkeypatch.chdir(tmp_path)
+    c, faces = np.asarray(meshes["c"].vertices), np.asarray(meshes["c"].faces)
+    _bodies(tmp_path / "good", c, faces, [("a.obj", 0.1), ("b.obj", 0.05)])
+    _bodies(tmp_path / "bodies", c, faces, [("a.obj", 0.1), ("b.obj", 0.05)])
+    trimesh.creation.icosphere(subdivisions=1).export(tmp_path / "bodies" / "z.obj")  # the last, another topology
+    (tmp_path / "empty").mkdir()
+    (tmp_path / "afile").write_text("x")
+    before = set(tmp_path.rglob("*"))
+    base = ["drape", "--prior-only", "--canonical", str(folder / "c.obj"), "--garment", str(folder / "g.obj")]
+    assert _rc([*base, *argv]) == 2
+    assert expected in _one_error_line(capsys)
+    assert set(tmp_path.rglob("*")) == before
+
+
+def test_drape_pinned_auto_keeps_the_top_loop_on_the_prior(scene, tmp_path):
+    """--pinned auto on a tube open at both ends (around the scene's body), draped by the shipped model: the top
+    ring follows the prior; the bottom ring and the rest are the model's."""
+    from mesh_fixtures import loop_rows, open_cylinder
+
+    from garsim import GarSim
+    from garsim.geometry.io import load_mesh
+
+    folder, meshes = scene
+    gv, gf = open_cylinder(radius=0.26, z0=0.6, z1=1.1, rings=12, sections=40)
+    _write_obj(tmp_path / "tube.obj", gv, gf)
+    out = tmp_path / "draped.obj"
+    argv = ["--canonical", str(folder / "c.obj"), "--target", str(folder / "t.obj"), "--garment"]
+    assert main(["drape", *argv, str(tmp_path / "tube.obj"), "--pinned", "auto", "--out", str(out)]) == 0
+    draped = load_mesh(out)[0]
+    prior = GarSim.prior_only().drape(meshes["c"], meshes["t"], (gv, gf))
+    top, bottom = loop_rows(40, 11), loop_rows(40, 0)
+    np.testing.assert_allclose(draped[top], prior[top], atol=1e-7)
+    assert np.abs(draped[bottom] - prior[bottom]).max() > 1e-4
+    assert "auto" in build_parser()._subparsers._group_actions[0].choices["drape"].format_help()
 
 
 @pytest.mark.parametrize(
@@ -448,6 +582,28 @@ def test_animate_mesh_sequence_from_a_folder(scene, tmp_path, capsys):
     last = GarSim.prior_only().drape((c, faces), (c + [0.0, 0.1, 0.0], faces), (g.vertices, g.faces))
     assert frames.shape == (3, len(g.vertices), 3)
     np.testing.assert_allclose(frames[-1], last, atol=1e-5)
+
+
+def test_animate_carries_the_garments_uvs(scene, tmp_path, caplog):
+    """Per-vertex UVs of the garment go to the animation (here the OBJ beside the PC2); seams are dropped there
+    with a warning (the formats store one UV per vertex)."""
+    from mesh_fixtures import obj_lists, seamed_obj_text
+
+    folder, meshes = scene
+    c, faces, g = np.asarray(meshes["c"].vertices), np.asarray(meshes["c"].faces), meshes["g"]
+    bodies = _bodies(tmp_path / "bodies", c, faces, [("0.obj", 0.0), ("1.obj", 0.05)])
+    uv = np.random.default_rng(0).random((len(g.vertices), 2)).round(6)
+    lines = [f"v {x!r} {y!r} {z!r}" for x, y, z in np.asarray(g.vertices).tolist()]
+    lines += [f"vt {a!r} {b!r}" for a, b in uv.tolist()] + [f"f {a}/{a} {b}/{b} {c}/{c}" for a, b, c in g.faces + 1]
+    (tmp_path / "g.obj").write_text("\n".join(lines) + "\n")
+    argv = ["animate", "--canonical", str(folder / "c.obj"), "--targets", str(bodies), "--prior-only", "--quiet"]
+    assert main([*argv, "--garment", str(tmp_path / "g.obj"), "--out", str(tmp_path / "a.pc2")]) == 0
+    np.testing.assert_allclose(obj_lists(tmp_path / "a.obj")[1], uv, atol=1e-7)
+    text = seamed_obj_text(np.asarray(g.vertices), np.asarray(g.faces), normals=False)[0]
+    (tmp_path / "seams.obj").write_text(text)
+    with caplog.at_level("WARNING"):
+        assert main([*argv, "--garment", str(tmp_path / "seams.obj"), "--out", str(tmp_path / "s.pc2")]) == 0
+    assert "seams" in caplog.text and len(obj_lists(tmp_path / "s.obj")[1]) == 0
 
 
 @pytest.mark.parametrize(

@@ -5,11 +5,14 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import trimesh
+from mesh_fixtures import obj_lists, seamed_obj_text
 
 from garsim.geometry.io import (
+    MeshAttributes,
     MeshError,
     as_mesh,
     load_mesh,
+    load_mesh_with_attributes,
     save_mesh,
     triangulate_polygons,
     validate_mesh,
@@ -169,3 +172,95 @@ def test_as_mesh_accepts_trimesh_pairs_paths_and_objects(tmp_path, icosphere):
         as_mesh(42)
     with pytest.raises(MeshError, match="pair"):
         as_mesh((v, f, f))
+
+
+# --- UVs and normals ------------------------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("normals", [False, True], ids=["v/vt", "v/vt/vn"])
+def test_obj_uv_seams_and_normals_round_trip(tmp_path, icosphere, normals):
+    """An OBJ with more vt than v keeps its vertex order, vt list and per-corner indices through load + save."""
+    v, f = icosphere
+    text, vt, tf = seamed_obj_text(v.astype(np.float64), f, normals)
+    src = tmp_path / "seams.obj"
+    src.write_text(text)
+    v1, f1 = load_mesh(src)
+    v2, f2, attrs = load_mesh_with_attributes(src)
+    assert len(v1) == len(v) and len(vt) > len(v)
+    np.testing.assert_array_equal(v2, v1)
+    np.testing.assert_array_equal(f2, f)
+    np.testing.assert_array_equal(attrs.uvs, vt)
+    np.testing.assert_array_equal(attrs.uv_faces, tf)
+    assert attrs.vertex_uvs(f2, len(v2)) is None  # seams: no single UV per vertex
+    assert (attrs.normals is not None) == normals
+    out = save_mesh(tmp_path / "out.obj", v2 * 2, f2, attributes=attrs)
+    ov, ovt, of = obj_lists(out)
+    np.testing.assert_allclose(ov, v2 * 2, atol=1e-6)
+    np.testing.assert_array_equal(ovt, vt)  # the same numbers, exactly
+    assert of == [line.split()[1:] for line in text.splitlines() if line.startswith("f ")]
+
+
+def test_quads_with_uvs_match_the_triangulated_faces(tmp_path):
+    """trimesh triangulates quads in its own order: the corner indices follow its triangles."""
+    path = tmp_path / "quads.obj"
+    path.write_text(
+        "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nv 2 0 0\nv 2 1 0\n"
+        "vt 0 0\nvt 0.1 0\nvt 0.1 0.1\nvt 0 0.1\nvt 0.3 0\nvt 0.3 0.1\nvt 0.7 0.7\nvn 0 0 1\nvn 0 0 1\n"
+        "f 1/1/1 2/2/1 3/3/1 4/4/1\nf 2/7/2 5/5/2 6/6/2 3/3/2\n"
+    )
+    v, f, a = load_mesh_with_attributes(path)
+    uv_of = {(0, 0): 0, (0, 1): 1, (0, 2): 2, (0, 3): 3, (1, 1): 6, (1, 4): 4, (1, 5): 5, (1, 2): 2}
+    quad = [0 if set(tri) <= {0, 1, 2, 3} else 1 for tri in f.tolist()]
+    expected = [[uv_of[(q, int(i))] for i in tri] for q, tri in zip(quad, f)]
+    np.testing.assert_array_equal(a.uv_faces, expected)
+    np.testing.assert_array_equal(a.normal_faces, np.repeat(np.array(quad)[:, None], 3, axis=1))
+
+
+def test_normals_are_recomputed_for_moved_vertices_and_turned_with_y_up(tmp_path):
+    v = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], dtype=np.float64)
+    f = np.array([[0, 1, 2], [0, 2, 3]])
+    attrs = MeshAttributes(normals=np.array([[0.0, 0.0, 1.0]]), normal_faces=np.zeros((2, 3), dtype=np.int64))
+    bent = v.copy()
+    bent[:, 2] = bent[:, 0]  # the square tilted 45 degrees about Y
+    moved = attrs.recompute_normals(bent, f)
+    np.testing.assert_allclose(moved.normals, [[-(0.5**0.5), 0.0, 0.5**0.5]], atol=1e-12)
+    flipped = MeshAttributes(normals=-attrs.normals, normal_faces=attrs.normal_faces).recompute_normals(bent, f)
+    np.testing.assert_allclose(flipped.normals, -moved.normals)  # oriented like the given normals
+    path = save_mesh(tmp_path / "y.obj", bent, f, attributes=moved, y_up=True)
+    np.testing.assert_allclose(load_mesh_with_attributes(path)[2].normals, z_up_to_y_up(moved.normals), atol=1e-12)
+
+
+def test_glb_and_ply_carry_per_vertex_uvs_and_obj_keeps_seams(tmp_path, icosphere, caplog):
+    v, f = icosphere
+    uv = np.random.default_rng(0).random((len(v), 2))
+    attrs = MeshAttributes(uvs=uv, uv_faces=f.copy())
+    for ext in (".glb", ".ply"):
+        v2, f2, a2 = load_mesh_with_attributes(save_mesh(tmp_path / f"m{ext}", v, f, attributes=attrs))
+        np.testing.assert_array_equal(f2, f)
+        np.testing.assert_allclose(a2.vertex_uvs(f2, len(v2)), uv, atol=1e-6)
+    seams = MeshAttributes(uvs=np.concatenate([uv, [[0.5, 0.5]]]), uv_faces=np.where(f == 0, len(uv), f))
+    seams.uv_faces[0, 0] = 0  # vertex 0 now has two UVs
+    with caplog.at_level("WARNING"):
+        path = save_mesh(tmp_path / "s.glb", v, f, attributes=seams)
+    assert "seams" in caplog.text and load_mesh_with_attributes(path)[2].uvs is None
+    assert save_mesh(tmp_path / "s.off", v, f, attributes=seams).exists()  # OFF has no UVs: nothing to keep
+
+
+@pytest.mark.parametrize(
+    "text, pattern",
+    [
+        ("v 0 0 0\nv 1 0 0\nv 0 1 0\nvt 0 0\nf 1/1 2/2 3/1\n", "'vt'"),
+        ("v 0 0 0\nv 1 0 0\nv 0 1 0\nvt 0 x\nf 1/1 2/1 3/1\n", "could not parse|line 4"),
+        ("v 0 0 0\nv 1 0 0\nv 0 1 0\nvt 0 nan\nf 1/1 2/1 3/1\n", "finite"),
+    ],
+    ids=["vt index out of range", "vt not a number", "vt NaN"],
+)
+def test_bad_uvs_give_one_line_errors(tmp_path, text, pattern):
+    path = tmp_path / "bad.obj"
+    path.write_text(text)
+    with pytest.raises(MeshError, match=pattern) as err:
+        load_mesh_with_attributes(path)
+    assert "\n" not in str(err.value) and "bad.obj" in str(err.value)
+    v, f = np.eye(3), np.array([[0, 1, 2]])
+    with pytest.raises(MeshError, match="UVs face indices outside"):
+        save_mesh(tmp_path / "o.obj", v, f, attributes=MeshAttributes(np.zeros((1, 2)), np.ones((1, 3), dtype=int)))

@@ -11,6 +11,7 @@ from garsim.geometry.mesh import (
     face_areas,
     face_normals,
     face_pairs,
+    top_border_loops,
     uniform_laplacian,
     unique_edges,
     vertex_normals,
@@ -118,3 +119,32 @@ def test_unique_edges_matches_row_unique_on_random_mesh():
     e = np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]])
     e.sort(axis=1)
     np.testing.assert_array_equal(unique_edges(faces), np.unique(e, axis=0))
+
+
+def test_top_border_loops_of_an_open_cylinder_is_its_top_ring_only():
+    from mesh_fixtures import loop_rows, open_cylinder
+
+    v, f = open_cylinder(radius=0.3, z0=0.2, z1=1.0, rings=6, sections=16)
+    loops = top_border_loops(v, f)
+    assert len(loops) == 1
+    np.testing.assert_array_equal(np.sort(loops[0]), loop_rows(16, 5))
+    # turned upside down, the other ring is the top
+    np.testing.assert_array_equal(np.sort(top_border_loops(v * [1, 1, -1], f)[0]), loop_rows(16, 0))
+
+
+def test_top_border_loops_keeps_every_loop_reaching_the_top_band():
+    """Two tubes side by side (a strapped top's neckline and armholes meet near the top): both top rings within
+    the band are picked, highest first; the bottom rings and a tube ending 10 cm lower are not."""
+    from mesh_fixtures import open_cylinder
+
+    parts = [
+        open_cylinder(0.1, 0.0, 1.0, centre=(0.0, 0.0)),
+        open_cylinder(0.1, 0.0, 0.98, centre=(0.5, 0.0)),
+        open_cylinder(0.1, 0.0, 0.9, centre=(1.0, 0.0)),
+    ]
+    v = np.concatenate([p[0] for p in parts])
+    f = np.concatenate([p[1] + k * len(parts[0][0]) for k, p in enumerate(parts)])
+    loops = top_border_loops(v, f)
+    assert [float(v[loop, 2].max()) for loop in loops] == pytest.approx([1.0, 0.98])
+    assert top_border_loops(v, f, band=0.0)[0].max() < len(parts[0][0])
+    assert top_border_loops(TET_V, TET_F) == []  # a closed surface has no border

@@ -7,7 +7,7 @@ import logging
 import numpy as np
 import pytest
 
-from garsim.geometry.mesh import unique_edges
+from garsim.geometry.mesh import edge_lengths, unique_edges
 from garsim.physics.newton_sim import (
     REJECT_NON_FINITE,
     REJECT_OVERSTRETCHED,
@@ -16,7 +16,6 @@ from garsim.physics.newton_sim import (
     SimulationRejected,
     check_result,
     crop_body,
-    rest_edge_lengths,
 )
 
 
@@ -43,7 +42,7 @@ def _reason(*args, **kwargs) -> tuple[str, str]:
 def test_check_result_accepts_a_clean_result(icosphere):
     bv, bf = icosphere
     v, f = _grid_patch()
-    rest = rest_edge_lengths(v, f)
+    rest = edge_lengths(v, f)
     frames = np.stack([v, v + [0.0, 0.0, 0.1]])
     assert check_result(frames, f, rest, bv, bf) is None
 
@@ -54,7 +53,7 @@ def test_check_result_rejects_nan_with_its_reason(icosphere, caplog):
     frames = np.stack([v, v.copy()])
     frames[1, 3, 2] = np.nan
     with caplog.at_level(logging.WARNING, logger="garsim.physics.newton_sim"), pytest.raises(SimulationRejected) as err:
-        check_result(frames, f, rest_edge_lengths(v, f), bv, bf)
+        check_result(frames, f, edge_lengths(v, f), bv, bf)
     assert err.value.reason == REJECT_NON_FINITE and "frame 1" in err.value.detail
     assert "rejected" in caplog.text and REJECT_NON_FINITE in caplog.text
 
@@ -65,24 +64,24 @@ def test_check_result_rejects_a_stretched_edge(icosphere):
     edges = unique_edges(f)
     bad = v.copy()
     bad[15] += [0.06, 0.0, 0.0]  # corner vertex: its edges grow to 1.6x (> 1.5x)
-    assert _reason(np.stack([v, bad]), f, rest_edge_lengths(v, f), bv, bf) == (REJECT_OVERSTRETCHED, "frame 1")
+    assert _reason(np.stack([v, bad]), f, edge_lengths(v, f), bv, bf) == (REJECT_OVERSTRETCHED, "frame 1")
     fine = v.copy()
     fine[15] += [0.04, 0.0, 0.0]  # 1.4x: accepted
-    check_result(fine, f, rest_edge_lengths(v, f), bv, bf)
-    assert len(edges) == len(rest_edge_lengths(v, f))
+    check_result(fine, f, edge_lengths(v, f), bv, bf)
+    assert len(edges) == len(edge_lengths(v, f))
     # edges between two pinned vertices follow the body, not the solver: not tested
     pinned = np.zeros(len(v), dtype=bool)
     pinned[15] = True
-    assert _reason(np.stack([v, bad]), f, rest_edge_lengths(v, f), bv, bf, pinned=pinned)[0] == REJECT_OVERSTRETCHED
+    assert _reason(np.stack([v, bad]), f, edge_lengths(v, f), bv, bf, pinned=pinned)[0] == REJECT_OVERSTRETCHED
     pinned[np.unique(edges[(edges == 15).any(axis=1)])] = True
-    check_result(np.stack([v, bad]), f, rest_edge_lengths(v, f), bv, bf, pinned=pinned)
+    check_result(np.stack([v, bad]), f, edge_lengths(v, f), bv, bf, pinned=pinned)
 
 
 def test_check_result_rejects_penetration_over_one_percent(icosphere):
     bv, bf = icosphere
     v, f = _grid_patch(n=11, size=0.5, z=0.0)  # 121 vertices in the sphere's equatorial plane: all inside
     outside = v + [0.0, 0.0, 1.5]
-    loose = rest_edge_lengths(v, f) * 100  # isolate the inside test from the stretch test
+    loose = edge_lengths(v, f) * 100  # isolate the inside test from the stretch test
     one = outside.copy()
     one[0] = [0.0, 0.0, 0.0]  # 1/121 < 1 %: accepted
     check_result(np.stack([outside, one]), f, loose, bv, bf)
@@ -176,7 +175,7 @@ def test_settle_then_chained_poses_settle_at_each(anny_body, lowres_skirt):
         template, g.faces, g.pinned, [seg_a, verts], body.faces, [pins_a, pins_b], ["cotton"], cfg
     )
     assert len(states) == 2 and [i["target"] for i in infos] == [0, 1]
-    rest = rest_edge_lengths(g.vertices, g.faces)
+    rest = edge_lengths(g.vertices, g.faces)
     for state, info, seg, pins in zip(states, infos, (seg_a, verts), (pins_a, pins_b)):
         assert state.shape == (1, len(template), 3) and info["settled"]
         assert max(info["final_speed"]) < cfg.settle_speed  # a settled sample is below the threshold
@@ -194,7 +193,7 @@ def test_absurd_timestep_is_caught(anny_body, lowres_skirt):
     v, info = settle(g, can.vertices, anny_body.faces, "silk", cfg)
     if info["aborted"] is None:
         with pytest.raises(SimulationRejected):
-            check_result(v[None], g.faces, rest_edge_lengths(g.vertices, g.faces), can.vertices, anny_body.faces)
+            check_result(v[None], g.faces, edge_lengths(g.vertices, g.faces), can.vertices, anny_body.faces)
 
 
 def paired_group(body, kind: str, params: dict, target_vertices: int, cfg: SimConfig):

@@ -176,9 +176,12 @@ def _run_readme(main, capsys) -> None:
                 rc = main(argv[1:])
                 captured = capsys.readouterr()
                 assert rc == 0, f"{where}\n{captured.err}"
-                for out in _outputs(argv):
-                    assert Path(out).is_file() and Path(out).stat().st_size > 0, f"{where}: no {out}"
-                    assert out in captured.out, f"{where}: {out} not printed"
+                for out in _outputs(argv):  # a file, or a folder of them (batch drapes)
+                    files = sorted(Path(out).iterdir()) if Path(out).is_dir() else [Path(out)]
+                    assert files, f"{where}: {out} is empty"
+                    for f in files:
+                        assert f.is_file() and f.stat().st_size > 0, f"{where}: no {f}"
+                        assert str(f) in captured.out, f"{where}: {f} not printed"
             ran.append(" ".join(argv))
     assert np.isfinite(namespace["verts"]).all()
     assert any(r.startswith("garsim drape") for r in ran) and any(r.startswith("garsim animate") for r in ran)

@@ -25,8 +25,14 @@ from dataclasses import asdict, dataclass
 import numpy as np
 
 from garsim.geometry.inside import closest_on_mesh, collision_fraction, inside_mask, segment_hits
-from garsim.geometry.mesh import face_normals, face_pairs, uniform_laplacian, unique_edges, vertex_normals
-from garsim.physics.newton_sim import rest_edge_lengths
+from garsim.geometry.mesh import (
+    edge_lengths,
+    face_normals,
+    face_pairs,
+    uniform_laplacian,
+    unique_edges,
+    vertex_normals,
+)
 
 
 @dataclass
@@ -91,7 +97,7 @@ def edge_crossing_pct(
 
 def edge_length_error_mm(pred: np.ndarray, truth: np.ndarray, faces: np.ndarray) -> float:
     """Mean absolute difference of edge lengths, predicted vs true (mm)."""
-    return float(np.abs(rest_edge_lengths(pred, faces) - rest_edge_lengths(truth, faces)).mean() * 1000.0)
+    return float(np.abs(edge_lengths(pred, faces) - edge_lengths(truth, faces)).mean() * 1000.0)
 
 
 def jitter_mm(frames: np.ndarray) -> float:

@@ -11,7 +11,6 @@ format PC2, and point it at the .pc2 file.
 
 from __future__ import annotations
 
-import io
 import os
 import struct
 from pathlib import Path
@@ -29,6 +28,7 @@ from garsim.export._common import (
     check_uvs,
     check_writable_folder,
 )
+from garsim.geometry.io import MeshAttributes, obj_text
 
 PC2_MAGIC = b"POINTCACHE2\0"
 PC2_HEADER = struct.Struct("<12siiffi")  # 32 bytes
@@ -72,24 +72,13 @@ def read_pc2(path: str | os.PathLike) -> tuple[np.ndarray, float, float]:
 
 def _obj_text(vertices: np.ndarray, faces: np.ndarray, uvs: np.ndarray | None, normals: np.ndarray | None) -> bytes:
     """OBJ text with one ``v`` (and ``vt``/``vn``) per vertex, in order; faces use 1-based ``v/vt/vn`` indices."""
-    buf = io.StringIO()
-    buf.write("# garsim export\n")
-    np.savetxt(buf, vertices, fmt="v %.9g %.9g %.9g")
-    if uvs is not None:
-        np.savetxt(buf, uvs, fmt="vt %.9g %.9g")
-    if normals is not None:
-        np.savetxt(buf, normals, fmt="vn %.9g %.9g %.9g")
-    f = faces + 1
-    if uvs is not None and normals is not None:
-        fmt, cols = "f %d/%d/%d %d/%d/%d %d/%d/%d", f[:, [0, 0, 0, 1, 1, 1, 2, 2, 2]]
-    elif uvs is not None:
-        fmt, cols = "f %d/%d %d/%d %d/%d", f[:, [0, 0, 1, 1, 2, 2]]
-    elif normals is not None:
-        fmt, cols = "f %d//%d %d//%d %d//%d", f[:, [0, 0, 1, 1, 2, 2]]
-    else:
-        fmt, cols = "f %d %d %d", f
-    np.savetxt(buf, cols, fmt=fmt)
-    return buf.getvalue().encode("ascii")
+    per_vertex = MeshAttributes(
+        uvs=uvs,
+        uv_faces=None if uvs is None else faces,
+        normals=normals,
+        normal_faces=None if normals is None else faces,
+    )
+    return obj_text(vertices, faces, per_vertex, header="garsim export")
 
 
 def write_obj(path: str | os.PathLike, vertices: Any, faces: Any, uvs: Any = None, normals: Any = None) -> Path:

@@ -14,6 +14,12 @@ Vertex order: files are read with ``process=False`` (no merging, no reordering) 
 ``maintain_order=True``. STL stores a triangle soup without shared vertices; it is merged on load
 (the order is then the order of first appearance) and cannot round-trip vertex order.
 
+Surface attributes: :func:`load_mesh_with_attributes` also returns a :class:`MeshAttributes`: an OBJ's texture
+coordinates (``vt``) and normals (``vn``) with their own per-corner indices (UV seams, hard edges: more ``vt`` than
+``v``), or a GLB's / PLY's per-vertex UVs. ``save_mesh(..., attributes=...)`` writes them back: OBJ with the same
+``vt``/``vn`` lists and face indices, GLB/PLY per-vertex UVs when the UVs have no seams (OFF/STL have no UVs).
+:meth:`MeshAttributes.recompute_normals` re-derives the normals of a moved mesh, split where the input's were.
+
 Axes: garsim works in metres with Z up and the body facing -Y. glTF and Blender's importers use
 Y up; ``save_mesh(..., y_up=True)`` rotates Z-up -> Y-up ((x, y, z) -> (x, z, -y), so the body
 faces +Z as glTF expects) and ``load_mesh(..., y_up=True)`` rotates back.
@@ -21,7 +27,10 @@ faces +Z as glTF expects) and ``load_mesh(..., y_up=True)`` rotates back.
 
 from __future__ import annotations
 
+import logging
 import os
+import warnings
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -29,6 +38,8 @@ import numpy as np
 
 from garsim.atomic import atomic_write_bytes
 from garsim.geometry.cache import ContentCache, content_key
+
+log = logging.getLogger(__name__)
 
 SUPPORTED_EXTENSIONS: tuple[str, ...] = (".obj", ".ply", ".glb", ".gltf", ".off", ".stl")
 """File types :func:`load_mesh` reads; :func:`save_mesh` writes all but ``.gltf``."""
@@ -239,11 +250,193 @@ def _check_obj_lines(p: Path) -> None:
         raise MeshError(f"{p}: line {n} {shown!r} is malformed: a '{kind.decode()}' line needs {need}")
 
 
-def load_mesh(path: str | os.PathLike, y_up: bool = False) -> tuple[np.ndarray, np.ndarray]:
-    """Read a triangle mesh (OBJ/PLY/GLB/glTF/OFF/STL) in file order -> validated (vertices, faces).
+@dataclass(frozen=True)
+class MeshAttributes:
+    """Texture coordinates and normals of a triangle mesh, each list with its own (F, 3) corner indices.
 
-    ``y_up=True`` converts a Y-up file (glTF/Blender) to garsim's Z-up.
+    ``uvs`` (K, 2) float64 and ``uv_faces`` (F, 3) int64: corner j of face i has UV ``uvs[uv_faces[i, j]]``, in
+    the order of the mesh's (triangulated) faces; K may exceed the vertex count (UV seams). Likewise ``normals``
+    (M, 3) and ``normal_faces`` (F, 3). Each list and its indices are both None or both set. Per-vertex
+    attributes have ``uv_faces`` (or ``normal_faces``) equal to the mesh's faces. An OBJ's ``vt`` w component is
+    not kept.
     """
+
+    uvs: np.ndarray | None = None
+    uv_faces: np.ndarray | None = None
+    normals: np.ndarray | None = None
+    normal_faces: np.ndarray | None = None
+
+    @property
+    def empty(self) -> bool:
+        return self.uvs is None and self.normals is None
+
+    def check(self, num_faces: int, name: str = "attributes") -> MeshAttributes:
+        """Raise :class:`MeshError` unless every list is finite and its indices are (num_faces, 3) and in range."""
+        for what, values, idx, width in (
+            ("UVs", self.uvs, self.uv_faces, 2),
+            ("normals", self.normals, self.normal_faces, 3),
+        ):
+            if (values is None) != (idx is None):
+                raise MeshError(f"{name}: {what} and their face indices go together; give both or neither")
+            if values is None:
+                continue
+            if values.ndim != 2 or values.shape[1] != width or not np.isfinite(values).all():
+                raise MeshError(f"{name}: {what} must be finite, shape (K, {width}), got {values.shape}")
+            if idx.shape != (num_faces, 3):
+                raise MeshError(
+                    f"{name}: {what} face indices have shape {idx.shape}; the mesh has {num_faces} triangles"
+                )
+            if idx.size and (idx.min() < 0 or idx.max() >= len(values)):
+                raise MeshError(f"{name}: {what} face indices outside [0, {len(values) - 1}]")
+        return self
+
+    def vertex_uvs(self, faces: np.ndarray, num_vertices: int) -> np.ndarray | None:
+        """(N, 2) one UV per vertex (0 for a vertex no face uses), or None: no UVs, or seams (a vertex with two)."""
+        if self.uvs is None:
+            return None
+        f, t = np.asarray(faces).ravel(), self.uv_faces.ravel()
+        per = np.zeros(num_vertices, dtype=np.int64)
+        used = np.zeros(num_vertices, dtype=bool)
+        per[f], used[f] = t, True
+        if not np.array_equal(self.uvs[per[f]], self.uvs[t]):
+            return None
+        out = self.uvs[per]
+        out[~used] = 0.0
+        return out
+
+    def recompute_normals(self, vertices: np.ndarray, faces: np.ndarray) -> MeshAttributes:
+        """These attributes with the normals of the mesh moved to ``vertices``: each normal the area-weighted mean
+        of the face normals at the corners that use it (normals split at hard edges stay split), oriented as the
+        old ones (flipped when they mostly disagree). A normal no corner uses keeps its value."""
+        if self.normals is None:
+            return self
+        v = np.asarray(vertices, dtype=np.float64)
+        f = np.asarray(faces)
+        fn = np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]])
+        idx, w = self.normal_faces.ravel(), np.repeat(fn, 3, axis=0)
+        acc = np.stack([np.bincount(idx, weights=w[:, c], minlength=len(self.normals)) for c in range(3)], axis=1)
+        length = np.linalg.norm(acc, axis=1)
+        ok = length > 0
+        new = np.array(self.normals, dtype=np.float64)
+        new[ok] = acc[ok] / length[ok, None]
+        if np.sum(new[ok] * self.normals[ok]) < 0:  # the old normals pointed the other way round the winding
+            new[ok] *= -1.0
+        return replace(self, normals=new)
+
+    def rotated(self, rotate: Any) -> MeshAttributes:
+        """The normals turned by ``rotate`` (e.g. :func:`z_up_to_y_up`) as the vertices are; UVs unchanged."""
+        return self if self.normals is None else replace(self, normals=rotate(self.normals))
+
+
+def _obj_index(token: bytes, count: int) -> int:
+    """A 1-based OBJ index (negative: relative to the ``count`` items read so far) -> 0-based, or -1 if absent."""
+    if not token:
+        return -1
+    i = int(token)
+    return i - 1 if i > 0 else count + i
+
+
+def _obj_floats(fields: list[bytes], need: int, keep: int, p: Path, lineno: int, kind: str) -> list[float]:
+    try:
+        values = [float(x) for x in fields[:keep]]
+    except ValueError:
+        values = []
+    if len(values) < need or not all(np.isfinite(values)):
+        shown = b" ".join(fields).decode("utf-8", errors="replace")[:60]
+        raise MeshError(
+            f"{p}: line {lineno} '{kind} {shown}' is malformed: a '{kind}' line needs {need} finite numbers"
+        )
+    return values + [0.0] * (keep - len(values))
+
+
+def _corner_map(src: np.ndarray, dst: np.ndarray) -> np.ndarray | None:
+    """For each corner of ``dst`` (F, 3), the flat index of the same corner in ``src``: the two hold the same
+    triangles up to row order and a cyclic turn of each row (trimesh triangulates quads in its own order); None
+    when they do not."""
+    if src.shape != dst.shape:
+        return None
+    if np.array_equal(src, dst):
+        return np.arange(src.size).reshape(src.shape)
+
+    def canonical(a: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        cols = (np.argmin(a, axis=1)[:, None] + np.arange(3)) % 3
+        return np.take_along_axis(a, cols, axis=1), cols
+
+    cs, cols_s = canonical(src)
+    cd, cols_d = canonical(dst)
+    rows_s, rows_d = np.lexsort(cs.T[::-1]), np.lexsort(cd.T[::-1])
+    if not np.array_equal(cs[rows_s], cd[rows_d]):
+        return None
+    out = np.empty(dst.shape, dtype=np.int64)
+    out[rows_d[:, None], cols_d[rows_d]] = rows_s[:, None] * 3 + cols_s[rows_s]
+    return out
+
+
+def _read_obj_attributes(p: Path, faces: np.ndarray) -> MeshAttributes:
+    """The ``vt``/``vn`` lists of an OBJ and their corner indices, fan-triangulated and matched to ``faces``
+    (trimesh's triangles of the same file). Raises MeshError for malformed or out-of-range ``vt``/``vn`` data."""
+    data = p.read_bytes()
+    if b"vt" not in data and b"vn" not in data:
+        return MeshAttributes()
+    counts = {b"v": 0, b"vt": 0, b"vn": 0}
+    uvs: list[list[float]] = []
+    normals: list[list[float]] = []
+    tri: list[tuple[int, int, int]] = []  # (v, vt, vn) per triangle corner
+    for lineno, raw in enumerate(data.splitlines(), 1):
+        fields = (raw.split(b"#", 1)[0] if b"#" in raw else raw).split()
+        if not fields:
+            continue
+        kind = fields[0]
+        if kind in counts:
+            counts[kind] += 1
+            if kind == b"vt":
+                uvs.append(_obj_floats(fields[1:], 1, 2, p, lineno, "vt"))
+            elif kind == b"vn":
+                normals.append(_obj_floats(fields[1:], 3, 3, p, lineno, "vn"))
+        elif kind == b"f" and len(fields) >= 4:
+            try:
+                corners = []
+                for token in fields[1:]:
+                    parts = token.split(b"/") + [b"", b""]
+                    corners.append(
+                        (
+                            _obj_index(parts[0], counts[b"v"]),
+                            _obj_index(parts[1], counts[b"vt"]),
+                            _obj_index(parts[2], counts[b"vn"]),
+                        )
+                    )
+            except ValueError:
+                continue  # trimesh has already read (or refused) the face
+            for j in range(1, len(corners) - 1):
+                tri.extend((corners[0], corners[j], corners[j + 1]))
+    if not tri:
+        return MeshAttributes()
+    c = np.asarray(tri, dtype=np.int64).reshape(-1, 3, 3)  # (triangles, corner, v/vt/vn)
+    where = _corner_map(c[:, :, 0], faces)
+    if where is None:
+        log.warning("%s: the faces' texture/normal indices could not be matched to the triangles; dropped", p)
+        return MeshAttributes()
+    out: dict[str, np.ndarray | None] = {}
+    for name, values, col, width in (("uv", uvs, 1, 2), ("normal", normals, 2, 3)):
+        idx = c[:, :, col].reshape(-1)[where]
+        out[name], out[name + "_faces"] = None, None
+        if not values or (idx < 0).all():
+            continue
+        kind = "vt" if col == 1 else "vn"
+        if (idx < 0).any():
+            log.warning("%s: some faces have no '%s' indices; the file's %ss are dropped", p, kind, name)
+            continue
+        if idx.max() >= len(values):
+            row = int(np.flatnonzero((idx >= len(values)).any(axis=1))[0])
+            raise MeshError(
+                f"{p}: face {row} references '{kind}' {int(idx[row].max()) + 1} but the file has {len(values)} "
+                f"'{kind}' lines; the face indices do not match the {name} list"
+            )
+        out[name], out[name + "_faces"] = np.asarray(values, dtype=np.float64).reshape(-1, width), idx
+    return MeshAttributes(out["uv"], out["uv_faces"], out["normal"], out["normal_faces"])
+
+
+def _load(path: str | os.PathLike, y_up: bool, attributes: bool) -> tuple[np.ndarray, np.ndarray, MeshAttributes]:
     import trimesh
 
     p, ext = _check_path(path, writing=False)
@@ -252,7 +445,9 @@ def load_mesh(path: str | os.PathLike, y_up: bool = False) -> tuple[np.ndarray, 
         _check_obj_lines(p)
         kwargs.update(maintain_order=True, skip_materials=True)
     try:
-        loaded = trimesh.load(str(p), force="mesh", **kwargs)
+        with warnings.catch_warnings():  # trimesh's UV un-merging warns on faces without texture indices
+            warnings.simplefilter("ignore", RuntimeWarning)
+            loaded = trimesh.load(str(p), force="mesh", **kwargs)
     except Exception as exc:  # noqa: BLE001 - trimesh raises many types on malformed files
         detail = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
         if isinstance(exc, IndexError):
@@ -274,9 +469,34 @@ def load_mesh(path: str | os.PathLike, y_up: bool = False) -> tuple[np.ndarray, 
         rank[order] = np.arange(len(order))
         vertices, faces = uniq[order], rank[inverse.ravel()][faces]
     v, f = validate_mesh(vertices, faces, name=str(p))
+    attrs = MeshAttributes()
+    if attributes and ext == ".obj":
+        attrs = _read_obj_attributes(p, f)
+    elif attributes and ext != ".stl":
+        uv = getattr(getattr(loaded, "visual", None), "uv", None)
+        if uv is not None and np.shape(uv) == (len(v), 2) and np.isfinite(uv).all():
+            attrs = MeshAttributes(uvs=np.asarray(uv, dtype=np.float64), uv_faces=f.copy())
     if y_up:
         v = y_up_to_z_up(v)
+        attrs = attrs.rotated(y_up_to_z_up)
+    return v, f, attrs
+
+
+def load_mesh(path: str | os.PathLike, y_up: bool = False) -> tuple[np.ndarray, np.ndarray]:
+    """Read a triangle mesh (OBJ/PLY/GLB/glTF/OFF/STL) in file order -> validated (vertices, faces).
+
+    ``y_up=True`` converts a Y-up file (glTF/Blender) to garsim's Z-up.
+    """
+    v, f, _ = _load(path, y_up, attributes=False)
     return v, f
+
+
+def load_mesh_with_attributes(
+    path: str | os.PathLike, y_up: bool = False
+) -> tuple[np.ndarray, np.ndarray, MeshAttributes]:
+    """:func:`load_mesh` plus the file's UVs and normals (:class:`MeshAttributes`, empty when it has none): an
+    OBJ's ``vt``/``vn`` with their per-corner indices (seams kept), a GLB's or PLY's per-vertex UVs."""
+    return _load(path, y_up, attributes=True)
 
 
 def _as_rgba_uint8(colors: Any, n: int) -> np.ndarray:
@@ -295,26 +515,87 @@ def _as_rgba_uint8(colors: Any, n: int) -> np.ndarray:
     return c
 
 
+def _obj_rows(buf: Any, prefix: str, values: np.ndarray) -> None:
+    """``prefix x y ...`` lines: float64 at full precision (the shortest text that reads back to the same number,
+    so a file's UVs round-trip exactly), float32 with 9 significant digits (exact for float32)."""
+    if values.dtype == np.float64:
+        buf.writelines(f"{prefix} {' '.join(map(repr, row))}\n" for row in values.tolist())
+    else:
+        np.savetxt(buf, values, fmt=" ".join([prefix] + ["%.9g"] * values.shape[1]))
+
+
+def obj_text(
+    vertices: np.ndarray,
+    faces: np.ndarray,
+    attributes: MeshAttributes | None = None,
+    vertex_colors: np.ndarray | None = None,
+    header: str = "garsim",
+) -> bytes:
+    """OBJ text: one ``v`` per vertex in order (``v x y z r g b`` with colours), the ``vt``/``vn`` lists, and
+    ``f v/vt/vn`` corners with 1-based indices. Arrays are taken as validated (:func:`save_mesh` checks them)."""
+    import io
+
+    buf = io.StringIO()
+    buf.write(f"# {header}\n")
+    v = np.asarray(vertices)
+    if vertex_colors is not None:
+        v = np.concatenate([v.astype(np.float64), np.asarray(vertex_colors)[:, :3] / 255.0], axis=1)
+        np.savetxt(buf, v, fmt="v %.9g %.9g %.9g %.6g %.6g %.6g")
+    else:
+        _obj_rows(buf, "v", v)
+    a = attributes or MeshAttributes()
+    columns = [np.asarray(faces) + 1]
+    if a.uvs is not None:
+        _obj_rows(buf, "vt", a.uvs)
+        columns.append(a.uv_faces + 1)
+    if a.normals is not None:
+        _obj_rows(buf, "vn", a.normals)
+        columns.append(a.normal_faces + 1)
+    corner = {1: "%d", 2: "%d/%d" if a.uvs is not None else "%d//%d", 3: "%d/%d/%d"}[len(columns)]
+    np.savetxt(buf, np.stack(columns, axis=2).reshape(len(columns[0]), -1), fmt="f " + " ".join([corner] * 3))
+    return buf.getvalue().encode("ascii")
+
+
 def save_mesh(
     path: str | os.PathLike,
     vertices: np.ndarray,
     faces: np.ndarray,
     vertex_colors: np.ndarray | None = None,
     y_up: bool = False,
+    attributes: MeshAttributes | None = None,
 ) -> Path:
     """Write a validated mesh atomically (temp file + rename) in vertex order; returns the path.
 
-    ``vertex_colors``: (V, 3|4) floats in [0, 1] or uint8. ``y_up=True`` rotates Z-up -> Y-up.
+    ``vertex_colors``: (V, 3|4) floats in [0, 1] or uint8. ``y_up=True`` rotates Z-up -> Y-up (the vertices and
+    the attributes' normals). ``attributes`` (:class:`MeshAttributes`, e.g. from :func:`load_mesh_with_attributes`):
+    OBJ gets the same UV and normal lists and corner indices; GLB and PLY get per-vertex UVs when the UVs have no
+    seams (with seams a warning says to write OBJ) and vertex colours, if given, take their place; OFF and STL
+    have no UVs.
     """
     import trimesh
 
     p, ext = _check_path(path, writing=True)
     v, f = validate_mesh(vertices, faces, name=str(p))
+    attrs = attributes.check(len(f), name=str(p)) if attributes is not None and not attributes.empty else None
+    colors = None if vertex_colors is None else _as_rgba_uint8(vertex_colors, len(v))
     if y_up:
         v = z_up_to_y_up(v)
+        attrs = attrs.rotated(z_up_to_y_up) if attrs is not None else None
+    if ext == ".obj" and attrs is not None:
+        return atomic_write_bytes(p, obj_text(v, f, attrs, colors))
     mesh = trimesh.Trimesh(vertices=v.astype(np.float64), faces=f, process=False, validate=False)
-    if vertex_colors is not None:
-        mesh.visual = trimesh.visual.ColorVisuals(mesh=mesh, vertex_colors=_as_rgba_uint8(vertex_colors, len(v)))
+    uv = attrs.vertex_uvs(f, len(v)) if attrs is not None and ext in (".glb", ".ply") else None
+    if attrs is not None and attrs.uvs is not None and uv is None and ext in (".glb", ".ply"):
+        log.warning(
+            "%s: the UVs have seams (a vertex with two UVs), which %s stores per vertex: dropped; "
+            "write .obj to keep them",
+            p,
+            ext,
+        )
+    if colors is not None:
+        mesh.visual = trimesh.visual.ColorVisuals(mesh=mesh, vertex_colors=colors)
+    elif uv is not None:
+        mesh.visual = trimesh.visual.TextureVisuals(uv=uv)
     export_kwargs: dict[str, Any] = {}
     if ext == ".obj":
         export_kwargs.update(include_normals=False, include_texture=False, digits=8)

@@ -20,6 +20,13 @@ def unique_edges(faces: np.ndarray) -> np.ndarray:
     return np.stack([key // n, key % n], axis=1)
 
 
+def edge_lengths(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """Lengths of ``unique_edges(faces)`` on ``vertices`` (float64), e.g. a template's rest lengths."""
+    e = unique_edges(faces)
+    v = np.asarray(vertices, dtype=np.float64)
+    return np.linalg.norm(v[e[:, 1]] - v[e[:, 0]], axis=1)
+
+
 def directed_edges(faces: np.ndarray) -> np.ndarray:
     """(2, 2E) both directions of every undirected edge: row 0 senders, row 1 receivers."""
     e = unique_edges(faces)
@@ -136,3 +143,22 @@ def border_loops(faces: np.ndarray) -> list[np.ndarray]:
     adj = sp.coo_matrix((np.ones(len(inv)), (inv[:, 0], inv[:, 1])), shape=(len(verts), len(verts)))
     ncomp, labels = connected_components(adj, directed=False)
     return [verts[labels == c] for c in range(ncomp)]
+
+
+TOP_LOOP_BAND = 0.04
+"""m: a border loop is a top loop when its highest vertex is within this of the highest border vertex (the band
+the data generator pins shoulder-hung garments in, ``physics.generate.SHOULDER_PIN_BAND``)."""
+
+
+def top_border_loops(vertices: np.ndarray, faces: np.ndarray, band: float = TOP_LOOP_BAND) -> list[np.ndarray]:
+    """The border loops a garment hangs from, highest first: every loop whose highest vertex (Z up) is within
+    ``band`` of the highest border vertex. A skirt's or trousers' waistband; the neck of a t-shirt (its sleeve
+    hems end lower); the neckline and both armholes of a strapped top or dress (they meet on the straps). A
+    garment without a border (closed) has none."""
+    z = np.asarray(vertices)[:, 2]
+    loops = border_loops(faces)
+    if not loops:
+        return []
+    tops = np.array([z[loop].max() for loop in loops])
+    keep = np.flatnonzero(tops >= tops.max() - band)
+    return [loops[i] for i in keep[np.argsort(-tops[keep], kind="stable")]]

@@ -310,14 +310,8 @@ def simulate_job(job: JobSpec, config: GenerateConfig) -> tuple[list[SequenceRec
     from garsim.garments.garment import Garment
     from garsim.garments.remesh import decimate, transfer_barycentric
     from garsim.geometry.io import MeshError, validate_mesh
-    from garsim.physics.newton_sim import (
-        SimConfig,
-        SimulationRejected,
-        check_result,
-        rest_edge_lengths,
-        settle,
-        simulate_poses,
-    )
+    from garsim.geometry.mesh import edge_lengths
+    from garsim.physics.newton_sim import SimConfig, SimulationRejected, check_result, settle, simulate_poses
 
     t0, c0 = time.perf_counter(), time.process_time()
     sim_cfg = SimConfig(**config.sim)
@@ -333,7 +327,7 @@ def simulate_job(job: JobSpec, config: GenerateConfig) -> tuple[list[SequenceRec
     if job.canonical_arm != T_POSE_ARM:  # skin the T-pose garment to the job's canonical arms
         moved = garment_prior(body, tpose, canonical, garment.vertices)
         garment = Garment(moved, garment.faces, garment.pinned, garment.kind, garment.params)
-    rest = rest_edge_lengths(garment.vertices, garment.faces)
+    rest = edge_lengths(garment.vertices, garment.faces)
     fabrics = [fabric_from_values({k: v for k, v in f.items() if k != "name"}, f["name"]) for f in job.fabrics]
     settle_fabric = (
         fabric_from_values(

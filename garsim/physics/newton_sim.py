@@ -461,13 +461,6 @@ def mean_fold_angle(vertices: np.ndarray, faces: np.ndarray) -> float:
     return float(np.degrees(np.arccos(cos)).mean())
 
 
-def rest_edge_lengths(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
-    """Lengths of ``unique_edges(faces)`` on ``vertices`` (the rest lengths ``check_result`` compares to)."""
-    e = unique_edges(faces)
-    v = np.asarray(vertices, dtype=np.float64)
-    return np.linalg.norm(v[e[:, 1]] - v[e[:, 0]], axis=1)
-
-
 def inside_fraction(points: np.ndarray, body_vertices: np.ndarray, body_faces: np.ndarray) -> float:
     """Fraction of ``points`` inside the body (warp winding-number test)."""
     from garsim.geometry.inside import InsideTester
