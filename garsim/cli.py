@@ -336,9 +336,13 @@ def cmd_animate(args: argparse.Namespace) -> int:
     import numpy as np
 
     from garsim.api import GarSim, fabric_fields
-    from garsim.export import export_animation
+    from garsim.export import animation_files, export_animation
     from garsim.geometry.io import load_mesh, load_mesh_with_attributes
 
+    for o in animation_files(out, with_body=True):  # a .pc2 also writes <stem>.obj and the body's files
+        for flag, given in (("--garment", args.garment), ("--canonical", args.canonical)):
+            if given and _same_file(o, given):
+                raise ValueError(f"--out {out} would overwrite the input {flag} {given} (as {o}); write elsewhere")
     fabric_fields(args.fabric)
     gv, gf, attributes = load_mesh_with_attributes(args.garment)
     garment = (gv, gf)

@@ -542,6 +542,11 @@ def test_drape_pinned_auto_keeps_the_top_loop_on_the_prior(scene, tmp_path):
         ("npz without vertices", ["--canonical", "{c}", "--targets", "bad.npz", "--out", "w.glb"], "'vertices'"),
         ("truncated npz", ["--canonical", "{c}", "--targets", "cut.npz", "--out", "w.glb"], "not a readable .npz"),
         ("targets of wrong shape", ["--canonical", "{c}", "--targets", "flat.npz", "--out", "w.glb"], "(T, V, 3)"),
+        (
+            "pc2 whose OBJ is the garment",
+            ["--motion", "walk", "--out", "{g}.pc2"],
+            "would overwrite the input --garment",
+        ),
     ],
 )
 def test_animate_bad_input_is_one_line(case, argv, expected, scene, tmp_path, capsys, monkeypatch):
@@ -555,7 +560,7 @@ def test_animate_bad_input_is_one_line(case, argv, expected, scene, tmp_path, ca
     np.savez(tmp_path / "flat.npz", vertices=np.zeros((5, 3)))
     (tmp_path / "cut.npz").write_bytes((tmp_path / "bad.npz").read_bytes()[:60])
     before = set(tmp_path.rglob("*"))
-    argv = [a.format(c=folder / "c.obj") for a in argv]
+    argv = [a.format(c=folder / "c.obj", g=folder / "g") for a in argv]
     assert _rc(["animate", "--garment", str(folder / "g.obj"), "--prior-only", "--quiet", *argv]) == 2
     assert expected in _one_error_line(capsys)
     assert set(tmp_path.rglob("*")) == before

@@ -30,6 +30,7 @@ SUPPORTED_EXTENSIONS: tuple[str, ...] = GLTF_EXTENSIONS + USD_EXTENSIONS + PC2_E
 __all__ = [
     "ExportError",
     "SUPPORTED_EXTENSIONS",
+    "animation_files",
     "export_animation",
     "read_pc2",
     "write_gltf_animation",
@@ -39,6 +40,15 @@ __all__ = [
     "write_preview",
     "write_usd_animation",
 ]
+
+
+def animation_files(path: str | os.PathLike, with_body: bool = False) -> list[Path]:
+    """The files ``export_animation(path, ...)`` writes, main first (for checks before any work)."""
+    p = Path(path)
+    if p.suffix.lower() != ".pc2":
+        return [p]
+    body = p.with_name(f"{p.stem}_body.pc2")
+    return [p, p.with_suffix(".obj")] + ([body, body.with_suffix(".obj")] if with_body else [])
 
 
 def export_animation(path: str | os.PathLike, frames: Any, faces: Any, **kw: Any) -> list[Path]:
@@ -79,10 +89,10 @@ def _export_pc2(
     elif normals is not None:
         first_normals = normals
     # the OBJ first: it validates faces/uvs/normals before the cache exists
-    obj = write_obj(p.with_suffix(".obj"), v[0], faces, uvs=uvs, normals=first_normals)
+    files = animation_files(p, with_body=body is not None)
+    obj = write_obj(files[1], v[0], faces, uvs=uvs, normals=first_normals)
     out = [write_pc2(p, v, start=start, rate=rate), obj]
     if body is not None:
-        body_pc2 = p.with_name(f"{p.stem}_body.pc2")
-        out.append(write_pc2(body_pc2, body[0], start=start, rate=rate))
-        out.append(write_obj(body_pc2.with_suffix(".obj"), body[0][0], body[1]))
+        out.append(write_pc2(files[2], body[0], start=start, rate=rate))
+        out.append(write_obj(files[3], body[0][0], body[1]))
     return out
