@@ -1,55 +1,87 @@
-"""Time garsim.refine on the Anny body: a skirt as built (valid) and moved 1.5 cm toward the body axis.
+"""Time garsim.refine on one thread, optionally against another implementation of it, in one run.
 
-Usage: python examples/refine_check.py [600 2400 ...]   (process time, one thread; per-body work cached)
+The inputs are those of ``garsim bench`` (garsim.eval.bench): the shipped model's raw drape of a
+template on the default Anny body in the benchmark's step poses (correcting case), and the template
+on the canonical body moved by a different sub-millimetre offset every call (valid case); every call
+sees a new body pose, so the per-pose work is included. Process time, medians over the poses.
+
+Usage: python examples/refine_check.py [--garments skirt tshirt trousers] [--sizes 600 2400]
+       [--against OLD_REFINE.py]   (e.g. git show HEAD:garsim/refine.py > /tmp/old_refine.py)
 """
 
 from __future__ import annotations
 
-import sys
+import argparse
+import importlib.util
 import time
+from pathlib import Path
 
 import numpy as np
+import torch
 
+from garsim.api import GarSim
 from garsim.bodies.anny import AnnyBody
+from garsim.eval.bench import DEFAULT_POSE, drape_once
 from garsim.garments.templates import make_garment
-from garsim.geometry.inside import InsideTester
-from garsim.geometry.mesh import unique_edges
-from garsim.refine import obstacle, refine
+from garsim.refine import refine
 
 
-def _ms(args: tuple, kwargs: dict, repeat: int = 5) -> float:
-    t0 = time.process_time()
-    for _ in range(repeat):
-        refine(*args, **kwargs)
-    return 1e3 * (time.process_time() - t0) / repeat
+def load_refine(path: Path):
+    """The ``refine`` function of another copy of garsim/refine.py."""
+    spec = importlib.util.spec_from_file_location("other_refine", path)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module.refine
 
 
-def main(sizes: list[int]) -> None:
-    body = AnnyBody()
-    bv, bf = np.asarray(body.canonical().vertices), np.asarray(body.faces)
-    t0 = time.process_time()
-    obstacle(bv, bf)
-    print(f"per-body preparation (once per body, cached): {1e3 * (time.process_time() - t0):.0f} ms")
-    tester = InsideTester(bv, bf)
-    for n in sizes:
-        g = make_garment("skirt", body, target_vertices=n)
-        tpl = g.vertices.astype(np.float64)
-        radial = tpl[:, :2] - tpl[:, :2].mean(0)
-        radial /= np.linalg.norm(radial, axis=1, keepdims=True)
-        x = tpl.copy()
-        x[:, :2] -= 0.015 * radial
-        out = refine(x, tpl, g.faces, bv, bf, pinned=g.pinned)
-        e = unique_edges(g.faces)
-        rest = np.linalg.norm(tpl[e[:, 1]] - tpl[e[:, 0]], axis=1)
-        stretch = np.linalg.norm(out[e[:, 1]] - out[e[:, 0]], axis=1) / rest
-        t_valid = _ms((tpl, tpl, g.faces, bv, bf), {"pinned": g.pinned})
-        t_moved = _ms((x, tpl, g.faces, bv, bf), {"pinned": g.pinned})
-        print(
-            f"{len(tpl)} v: valid {t_valid:.1f} ms, moved-in {t_moved:.1f} ms; inside before "
-            f"{tester.inside(x).mean():.3%} after {tester.inside(out).mean():.3%}; "
-            f"p99 stretch {np.percentile(stretch, 99):.3f}; moved {(np.abs(out - x).max(1) > 0).sum()} vertices"
-        )
+def median_ms(fn, cases: list[tuple]) -> float:
+    fn(*cases[0][0], **cases[0][1])  # warm-up (kernels, per-garment caches); its pose is reused by no timed call
+    times = []
+    for args, kwargs in cases[1:]:
+        t0 = time.process_time()
+        fn(*args, **kwargs)
+        times.append(1e3 * (time.process_time() - t0))
+    return float(np.median(times))
+
+
+def cases_for(kind: str, size: int, body, model, poses: int = 8) -> dict[str, list[tuple]]:
+    """(args, kwargs) of refine for each pose: the raw network drape and the offset resting template."""
+    canonical = body.canonical()
+    g = make_garment(kind, body, target_vertices=size)
+    correct, valid = [], []
+    for k, a in enumerate(np.linspace(0.4, 1.2, poses)):
+        target = body.pose({**body.t_pose(), **{b: a * np.asarray(v) for b, v in DEFAULT_POSE.items()}})
+        pred, _ = drape_once(model, body, canonical, target, g.vertices, g.faces, g.pinned, "cotton", kind)
+        kwargs = {"fabric": "cotton", "pinned": g.pinned}
+        correct.append(((pred, g.vertices, g.faces, target.vertices, body.faces), kwargs))
+        offset = np.array([1e-4 * (k + 1), 0.0, 0.0], dtype=np.float32)
+        valid.append(((g.vertices + offset, g.vertices, g.faces, canonical.vertices + offset, body.faces), kwargs))
+    return {"vertices": len(g.vertices), "correct": correct, "valid": valid}
+
+
+def main(garments: list[str], sizes: list[int], against: Path | None) -> None:
+    torch.set_num_threads(1)
+    body = AnnyBody({})
+    model = GarSim.pretrained().model
+    model.eval()
+    other = load_refine(against) if against else None
+    for kind in garments:
+        for size in sizes:
+            cases = cases_for(kind, size, body, model)
+            line = f"{kind:9s} {cases['vertices']:5d} v:"
+            for name in ("valid", "correct"):
+                ms = median_ms(refine, cases[name])
+                line += f"  {name} {ms:6.1f} ms"
+                if other is not None:
+                    ms_other = median_ms(other, cases[name])
+                    line += f" (other {ms_other:6.1f} ms, {ms_other / ms:5.1f}x)"
+            print(line, flush=True)
 
 
 if __name__ == "__main__":
-    main([int(a) for a in sys.argv[1:]] or [600, 2400])
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("--garments", nargs="+", default=["skirt", "tshirt", "trousers"])
+    p.add_argument("--sizes", type=int, nargs="+", default=[600, 2400])
+    p.add_argument("--against", type=Path, default=None, help="another garsim/refine.py to time on the same inputs")
+    args = p.parse_args()
+    main(args.garments, args.sizes, args.against)

@@ -27,6 +27,7 @@ def test_bench_inference_tiny(anny_body, model):
     assert abs(r["vertices"] - 200) <= 0.2 * 200  # the template hits its vertex budget within 20 %
     assert r["repeats"] == 2 and r["cpu_ms"] > 0 and r["wall_ms"] > 0 and r["first_call_wall_ms"] > 0
     assert r["api_cpu_ms"] > 0
+    assert r["refine_correct_cpu_ms"] > 0 and r["refine_valid_cpu_ms"] > 0
     assert r["pose_seq_cpu_ms"] > 0 and r["pose_seq_wall_ms"] > 0
     parts = r["prior_cpu_ms"] + r["graph_cpu_ms"] + r["forward_cpu_ms"]
     assert 0 < parts <= r["cpu_ms"] * 1.05 + 0.5  # the three stages make up (almost all of) the call

@@ -9,6 +9,10 @@ The garment caches (nearest-vertex answers, garment kNN and edges) are cleared b
 timed call, so each call pays for its own garment (a new garment each time, not a replay).
 ``pose_seq_*`` times the other common case: the same garment on a sequence of new target
 poses (garment caches warm; prior, graph inputs and forward pass recomputed every call).
+``refine_*`` times the physical refinement (``garsim.refine``) the API runs after the network, on one
+thread and a new body pose every call (its per-pose work included): ``refine_correct`` on the network's
+raw prediction for each pose of that sequence, ``refine_valid`` on a drape that needs no correction
+(the template on the canonical body, both moved by a different sub-millimetre offset every call).
 
 Wall time on a shared machine includes waiting for other jobs; CPU time (``process_time``)
 of this process is the steadier figure. Compare variants as ratios within one run.
@@ -57,6 +61,32 @@ def drape_once(
     return pred, {"prior_cpu_ms": (c1 - c0) * 1e3, "graph_cpu_ms": (c2 - c1) * 1e3, "forward_cpu_ms": (c3 - c2) * 1e3}
 
 
+def bench_refine(
+    body,
+    canonical,
+    targets: Sequence[Any],
+    garment,
+    predictions: Sequence[np.ndarray],
+    fabric: str = "cotton",
+    shift: float = 1e-4,
+) -> dict[str, float]:
+    """Median CPU ms of ``refine`` on a new body pose every call: the raw ``predictions`` on ``targets``
+    (``refine_correct_cpu_ms``) and the resting template on the canonical body, both moved by k x ``shift``
+    metres in call k (``refine_valid_cpu_ms``)."""
+    from garsim.refine import refine
+
+    args = (garment.vertices, garment.faces)
+    correct, valid = [], []
+    for k, (target, pred) in enumerate(zip(targets, predictions)):
+        _, _, c = _timed(lambda: refine(pred, *args, target.vertices, body.faces, fabric, pinned=garment.pinned))
+        correct.append(c)
+        offset = np.array([shift * (k + 1), 0.0, 0.0], dtype=np.float32)  # a new obstacle pose, still valid
+        moved = (garment.vertices + offset, *args)
+        _, _, c = _timed(lambda: refine(*moved, canonical.vertices + offset, body.faces, fabric, pinned=garment.pinned))
+        valid.append(c)
+    return {"refine_correct_cpu_ms": float(np.median(correct)), "refine_valid_cpu_ms": float(np.median(valid))}
+
+
 def bench_inference(
     model,
     sizes: Sequence[int] = (600, 2400),
@@ -75,7 +105,8 @@ def bench_inference(
     "cpu_ms", "prior_cpu_ms", "graph_cpu_ms", "forward_cpu_ms", "pose_seq_cpu_ms", "pose_seq_wall_ms",
     "first_call_wall_ms", "api_cpu_ms", "repeats"}}`` (medians over ``repeats`` calls after one warm-up;
     ``first_call_wall_ms`` is the very first call, with the body's caches cold; ``pose_seq_*``
-    the same garment on ``repeats`` different target poses; ``api_cpu_ms`` ``GarSim.drape`` on mesh pairs).
+    the same garment on ``repeats`` different target poses; ``api_cpu_ms`` ``GarSim.drape`` on mesh pairs;
+    ``refine_correct_cpu_ms`` / ``refine_valid_cpu_ms`` from :func:`bench_refine` on those poses).
     """
     from garsim.bodies.anny import AnnyBody
     from garsim.garments.templates import make_garment
@@ -111,12 +142,15 @@ def bench_inference(
                 wall.append(w)
                 cpu.append(c)
                 parts.append(part)
-            seq_wall, seq_cpu = [], []
+            seq_wall, seq_cpu, seq_pred = [], [], []
             for tgt in sequence:  # same garment, new poses: garment caches stay warm
                 seq_args = (model, body, canonical, tgt, *args[4:])
-                _, w, c = _timed(lambda: drape_once(*seq_args))
+                (p, _), w, c = _timed(lambda: drape_once(*seq_args))
                 seq_wall.append(w)
                 seq_cpu.append(c)
+                seq_pred.append(p)
+            bench_refine(body, canonical, [target], gar, [pred], fabric, shift=-1e-4)  # warm-up: kernels, caches
+            refine_ms = bench_refine(body, canonical, sequence, gar, seq_pred, fabric)
             # the public call as a client makes it: mesh pairs in (bone transforms recovered from the
             # meshes), the max_vertices path for dense garments, the collision push-out; body caches warm
             sim = GarSim(model)
@@ -141,6 +175,7 @@ def bench_inference(
                 "pose_seq_wall_ms": float(np.median(seq_wall)),
                 "first_call_wall_ms": float(first_wall),
                 "api_cpu_ms": float(np.median(api_cpu)),
+                **refine_ms,
                 "repeats": int(repeats),
             }
     finally:
@@ -197,7 +232,7 @@ def bench_newton(
 
 
 def format_bench(results: Mapping[int, Mapping[str, float]]) -> str:
-    """One line per size: vertices, median CPU / wall ms and the prior / graph / forward split."""
+    """One line per size: vertices, median CPU / wall ms, the prior / graph / forward split and refine."""
     lines = []
     for n, r in results.items():
         lines.append(
@@ -205,9 +240,11 @@ def format_bench(results: Mapping[int, Mapping[str, float]]) -> str:
             f"[prior {r['prior_cpu_ms']:.1f}, graph {r['graph_cpu_ms']:.1f}, forward {r['forward_cpu_ms']:.1f}]; "
             f"same garment, new pose: cpu {r['pose_seq_cpu_ms']:.1f} ms; "
             f"first call (cold body) {r['first_call_wall_ms']:.0f} ms; "
-            f"GarSim.drape on mesh pairs: cpu {r['api_cpu_ms']:.1f} ms"
+            f"GarSim.drape on mesh pairs: cpu {r['api_cpu_ms']:.1f} ms; "
+            f"refine (new pose): correcting {r['refine_correct_cpu_ms']:.1f} ms, "
+            f"valid {r['refine_valid_cpu_ms']:.1f} ms"
         )
     return "\n".join(lines)
 
 
-__all__ = ["bench_inference", "bench_newton", "drape_once", "format_bench", "DEFAULT_POSE"]
+__all__ = ["bench_inference", "bench_newton", "bench_refine", "drape_once", "format_bench", "DEFAULT_POSE"]

@@ -1,0 +1,118 @@
+"""Issue 13's acceptance figures on the walk cycle of every garment family, through the public API.
+
+Each family (the parametric templates; the long-sleeve top from the implicit construction, which has no
+template) is draped on the default Anny body over ``motion("walk")`` by ``GarSim.pretrained()`` twice:
+raw (``collision_margin=None``) and with the default post-process (``refine=True``). Over all frames:
+edges whose template rest length is >= 5 mm and that have a free end (an edge between two pinned
+vertices follows the skinning prior, which refine does not move): max and 99th percentile of the
+stretch ratio and its mean; vertices inside the body (winding number) and edges whose segment meets the
+body surface, of all and of the free ones (pinned vertices follow the skinning prior, inside the body
+or not); and refine's own CPU time per frame (one thread, a new body pose every frame).
+
+Usage: python examples/refine_walk.py [--vertices 600 2400] [--frames 30] [--out docs/refine.json]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import time
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from garsim.api import GarSim
+from garsim.bodies.anny import AnnyBody
+from garsim.bodies.poses import batched_matrices, motion, stack_poses
+from garsim.demo import DEMO_GARMENTS, _build_garment
+from garsim.geometry.inside import InsideTester
+from garsim.geometry.mesh import unique_edges
+from garsim.refine import refine
+
+MIN_REST = 0.005  # m: shorter (seam) edges are left out of the stretch figures, as the issue asks
+
+
+def frame_figures(frames: np.ndarray, garment, targets: np.ndarray, faces: np.ndarray) -> dict[str, float]:
+    """Stretch, inside and edge-crossing figures of (T, N, 3) drapes on their (T, Vb, 3) target bodies."""
+    e = unique_edges(garment.faces)
+    tpl = np.asarray(garment.vertices, np.float64)
+    rest = np.linalg.norm(tpl[e[:, 1]] - tpl[e[:, 0]], axis=1)
+    counted = (rest >= MIN_REST) & ~(garment.pinned[e[:, 0]] & garment.pinned[e[:, 1]])
+    free_edges = ~(garment.pinned[e[:, 0]] | garment.pinned[e[:, 1]])
+    ratios, inside, through = [], [], []
+    tester = InsideTester(targets[0], faces)
+    for x, body in zip(np.asarray(frames, np.float64), targets):
+        tester.update(body)
+        ratios.append(np.linalg.norm(x[e[:, 1]] - x[e[:, 0]], axis=1)[counted] / rest[counted])
+        inside.append(tester.inside(x))
+        through.append(tester.segment_hits(x[e[:, 0]], x[e[:, 1]]))
+    r, inside, through = np.concatenate(ratios), np.stack(inside), np.stack(through)
+    return {
+        "max_stretch": float(r.max()),
+        "p99_stretch": float(np.percentile(r, 99)),
+        "mean_stretch": float(r.mean()),
+        "edges_over_1.5_pct": 100.0 * float(np.mean(r > 1.5)),
+        "inside_pct": 100.0 * float(inside.mean()),
+        "inside_free_pct": 100.0 * float(inside[:, ~garment.pinned].mean()),  # pinned vertices follow the prior
+        "edges_through_pct": 100.0 * float(through.mean()),
+        "edges_through_free_pct": 100.0 * float(through[:, free_edges].mean()),  # edges without a pinned end
+    }
+
+
+def refine_ms(raw: np.ndarray, garment, targets: np.ndarray, faces: np.ndarray, fabric: str) -> float:
+    """Median CPU ms of refine per frame (the raw frame on its own pose, as the API calls it)."""
+    refine(raw[0], garment.vertices, garment.faces, targets[0], faces, fabric, pinned=garment.pinned)  # warm-up
+    times = []
+    for x, body in zip(raw[1:], targets[1:]):
+        t0 = time.process_time()
+        refine(x, garment.vertices, garment.faces, body, faces, fabric, pinned=garment.pinned)
+        times.append(1e3 * (time.process_time() - t0))
+    return float(np.median(times))
+
+
+def main(vertices: list[int], frames: int, out: Path) -> dict:
+    torch.set_num_threads(1)
+    body = AnnyBody({})
+    canonical = (body.canonical().vertices, body.faces)
+    targets = body.pose_batch(batched_matrices(stack_poses(motion("walk", frames))))[0]
+    raw_sim, sim = GarSim.pretrained(collision_margin=None), GarSim.pretrained()
+    report: dict = {"motion": "walk", "frames": frames, "min_rest_m": MIN_REST, "families": {}}
+    for kind, (fabric, construction) in DEMO_GARMENTS.items():
+        for n in vertices:
+            g = _build_garment(kind, construction, body, n)
+            mesh = (g.vertices, g.faces)
+            raw = raw_sim.drape_sequence(canonical, targets, mesh, fabric=fabric, pinned=g.pinned)
+            refined = sim.drape_sequence(canonical, targets, mesh, fabric=fabric, pinned=g.pinned)
+            entry = {
+                "vertices": int(len(g.vertices)),
+                "fabric": fabric,
+                "construction": construction,
+                "raw": frame_figures(raw, g, targets, body.faces),
+                "refined": frame_figures(refined, g, targets, body.faces),
+                "refine_cpu_ms_per_frame": refine_ms(raw, g, targets, body.faces, fabric),
+                "moved_mm_mean": 1000.0 * float(np.linalg.norm(refined - raw, axis=2).mean()),
+            }
+            report["families"][f"{kind}@{n}"] = entry
+            a, b = entry["raw"], entry["refined"]
+            print(
+                f"{kind:10s} {entry['vertices']:5d} v: max {a['max_stretch']:.2f} -> {b['max_stretch']:.2f}, "
+                f"p99 {a['p99_stretch']:.3f} -> {b['p99_stretch']:.3f}, mean {a['mean_stretch']:.3f} -> "
+                f"{b['mean_stretch']:.3f}, inside {a['inside_pct']:.2f} -> {b['inside_pct']:.2f} % "
+                f"(free {b['inside_free_pct']:.2f}), through {a['edges_through_pct']:.2f} -> "
+                f"{b['edges_through_pct']:.2f} % (free {b['edges_through_free_pct']:.2f}), "
+                f"refine {entry['refine_cpu_ms_per_frame']:.1f} ms/frame",
+                flush=True,
+            )
+    out.parent.mkdir(parents=True, exist_ok=True)
+    out.write_text(json.dumps(report, indent=1) + "\n")
+    return report
+
+
+if __name__ == "__main__":
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("--vertices", type=int, nargs="+", default=[600, 2400])
+    p.add_argument("--frames", type=int, default=30)
+    p.add_argument("--out", type=Path, default=Path("docs/refine.json"))
+    args = p.parse_args()
+    main(args.vertices, args.frames, args.out)
