@@ -7,9 +7,12 @@ edges whose template rest length is >= 5 mm and that have a free end (an edge be
 vertices follows the skinning prior, which refine does not move): max and 99th percentile of the
 stretch ratio and its mean; vertices inside the body (winding number) and edges whose segment meets the
 body surface, of all and of the free ones (pinned vertices follow the skinning prior, inside the body
-or not); and refine's own CPU time per frame (one thread, a new body pose every frame).
+or not); and refine's own CPU time per frame (one thread, a new body pose every frame). Issue 12's sequence
+figures come from the same runs: frame-to-frame jitter (``eval.metrics.jitter_mm``) of the prior, the raw
+network and the refined drape, and ``drape_sequence``'s frames per second after the first frame (wall clock,
+one thread).
 
-Usage: python examples/refine_walk.py [--vertices 600 2400] [--frames 30] [--out docs/refine.json]
+Usage: python examples/refine_walk.py [--model DIR] [--vertices 600 2400] [--frames 30] [--out docs/refine.json]
 """
 
 from __future__ import annotations
@@ -26,6 +29,7 @@ from garsim.api import GarSim
 from garsim.bodies.anny import AnnyBody
 from garsim.bodies.poses import batched_matrices, motion, stack_poses
 from garsim.demo import DEMO_GARMENTS, _build_garment
+from garsim.eval.metrics import jitter_mm
 from garsim.geometry.inside import InsideTester
 from garsim.geometry.mesh import unique_edges
 from garsim.refine import refine
@@ -71,19 +75,31 @@ def refine_ms(raw: np.ndarray, garment, targets: np.ndarray, faces: np.ndarray, 
     return float(np.median(times))
 
 
-def main(vertices: list[int], frames: int, out: Path) -> dict:
+def timed_sequence(sim: GarSim, canonical, targets: np.ndarray, mesh, **kw) -> tuple[np.ndarray, float]:
+    """``sim.drape_sequence`` -> (frames, frames per second after the first frame, wall clock)."""
+    first = sim.drape_sequence(canonical, targets[:1], mesh, **kw)
+    t0 = time.perf_counter()
+    rest = sim.drape_sequence(canonical, targets[1:], mesh, **kw)
+    return np.concatenate([first, rest]), (len(targets) - 1) / (time.perf_counter() - t0)
+
+
+def main(vertices: list[int], frames: int, out: Path, model: str | None = None) -> dict:
     torch.set_num_threads(1)
     body = AnnyBody({})
     canonical = (body.canonical().vertices, body.faces)
     targets = body.pose_batch(batched_matrices(stack_poses(motion("walk", frames))))[0]
-    raw_sim, sim = GarSim.pretrained(collision_margin=None), GarSim.pretrained()
-    report: dict = {"motion": "walk", "frames": frames, "min_rest_m": MIN_REST, "families": {}}
+    load = (lambda **kw: GarSim.load(model, **kw)) if model else GarSim.pretrained
+    raw_sim, sim, prior = load(collision_margin=None), load(), GarSim.prior_only()
+    report: dict = {"motion": "walk", "frames": frames, "min_rest_m": MIN_REST, "model": model or "shipped"}
+    report["families"] = {}
     for kind, (fabric, construction) in DEMO_GARMENTS.items():
         for n in vertices:
             g = _build_garment(kind, construction, body, n)
             mesh = (g.vertices, g.faces)
-            raw = raw_sim.drape_sequence(canonical, targets, mesh, fabric=fabric, pinned=g.pinned)
-            refined = sim.drape_sequence(canonical, targets, mesh, fabric=fabric, pinned=g.pinned)
+            kw = {"fabric": fabric, "pinned": g.pinned}
+            raw, raw_fps = timed_sequence(raw_sim, canonical, targets, mesh, **kw)
+            refined, fps = timed_sequence(sim, canonical, targets, mesh, **kw)
+            skinned = prior.drape_sequence(canonical, targets, mesh, **kw)
             entry = {
                 "vertices": int(len(g.vertices)),
                 "fabric": fabric,
@@ -92,6 +108,8 @@ def main(vertices: list[int], frames: int, out: Path) -> dict:
                 "refined": frame_figures(refined, g, targets, body.faces),
                 "refine_cpu_ms_per_frame": refine_ms(raw, g, targets, body.faces, fabric),
                 "moved_mm_mean": 1000.0 * float(np.linalg.norm(refined - raw, axis=2).mean()),
+                "jitter_mm": {"prior": jitter_mm(skinned), "raw": jitter_mm(raw), "refined": jitter_mm(refined)},
+                "sequence_fps": {"raw": raw_fps, "refined": fps},
             }
             report["families"][f"{kind}@{n}"] = entry
             a, b = entry["raw"], entry["refined"]
@@ -101,7 +119,8 @@ def main(vertices: list[int], frames: int, out: Path) -> dict:
                 f"{b['mean_stretch']:.3f}, inside {a['inside_pct']:.2f} -> {b['inside_pct']:.2f} % "
                 f"(free {b['inside_free_pct']:.2f}), through {a['edges_through_pct']:.2f} -> "
                 f"{b['edges_through_pct']:.2f} % (free {b['edges_through_free_pct']:.2f}), "
-                f"refine {entry['refine_cpu_ms_per_frame']:.1f} ms/frame",
+                f"refine {entry['refine_cpu_ms_per_frame']:.1f} ms/frame, jitter prior/raw/refined "
+                f"{'/'.join(f'{v:.2f}' for v in entry['jitter_mm'].values())} mm/frame², {fps:.0f} fps",
                 flush=True,
             )
     out.parent.mkdir(parents=True, exist_ok=True)
@@ -114,5 +133,6 @@ if __name__ == "__main__":
     p.add_argument("--vertices", type=int, nargs="+", default=[600, 2400])
     p.add_argument("--frames", type=int, default=30)
     p.add_argument("--out", type=Path, default=Path("docs/refine.json"))
+    p.add_argument("--model", help="a trained model folder (default: the shipped model)")
     args = p.parse_args()
-    main(args.vertices, args.frames, args.out)
+    main(args.vertices, args.frames, args.out, args.model)

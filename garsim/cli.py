@@ -21,8 +21,10 @@ from pathlib import Path
 from garsim.atomic import atomic_write_bytes
 
 FABRIC_CHOICES: tuple[str, ...] = ("silk", "cotton", "denim", "leather")
-MODEL_CHOICES: tuple[str, ...] = ("garsim", "deepsd")
 """The fabric presets (``garsim.data.sample.FABRICS``, repeated here so that parsing imports no numpy)."""
+FAMILY_CHOICES: tuple[str, ...] = ("skirt", "top", "tshirt", "longsleeve", "trousers", "dress")
+"""The garment families (``garsim.data.sample.GARMENT_TYPES``, repeated for the same reason)."""
+MODEL_CHOICES: tuple[str, ...] = ("garsim", "deepsd")
 MESH_OUTPUTS: tuple[str, ...] = (".obj", ".ply", ".glb", ".off", ".stl")
 """What ``garsim drape --out`` writes (``garsim.geometry.io.save_mesh``)."""
 MESH_INPUTS: tuple[str, ...] = (".obj", ".ply", ".glb", ".gltf", ".off", ".stl")
@@ -442,7 +444,9 @@ def cmd_train(args: argparse.Namespace) -> int:
     from garsim.train.losses import LossWeights
     from garsim.train.trainer import TrainConfig, Trainer
 
-    train, val = train_val_samples(args.data, resolution=args.resolution, val_every=args.val_every)
+    train, val = train_val_samples(
+        args.data, resolution=args.resolution, val_every=args.val_every, families=args.families
+    )
     init = load_model(args.init) if args.init else None
     given = {
         "epochs": args.epochs,
@@ -467,7 +471,7 @@ def cmd_train(args: argparse.Namespace) -> int:
         ids = {name: sorted({s.meta["seq_id"] for s in part}) for name, part in (("train", train), ("val", val))}
         _write_json(Path(args.out) / "sequences.json", ids)
     model_config = init.config if init is not None else GarSimConfig(**({"head": args.head} if args.head else {}))
-    history = Trainer(model_config, cfg, train, val, init=init).fit()
+    history = Trainer(model_config, cfg, train, val or None, init=init).fit()
     if history:
         print(json.dumps(history[-1], indent=2))
     return 0
@@ -650,6 +654,12 @@ def build_parser() -> argparse.ArgumentParser:
         help="train on the ~4x decimated meshes (the paper's choice), the full ones, or both",
     )
     p.add_argument("--val-every", type=int, default=10, help="hold out every N-th training sequence")
+    p.add_argument(
+        "--families",
+        nargs="+",
+        choices=FAMILY_CHOICES,
+        help="train (and validate) on these garment families only (default: all)",
+    )
     p.add_argument(
         "--collision-start",
         type=int,

@@ -214,13 +214,22 @@ def test_cli_import_is_light():
 
 def test_cli_choices_match_the_library():
     from garsim.bodies.poses import MOTIONS
-    from garsim.cli import ANIMATION_OUTPUTS, FABRIC_CHOICES, MESH_INPUTS, MESH_OUTPUTS, MODEL_CHOICES, MOTION_CHOICES
-    from garsim.data.sample import FABRICS
+    from garsim.cli import (
+        ANIMATION_OUTPUTS,
+        FABRIC_CHOICES,
+        FAMILY_CHOICES,
+        MESH_INPUTS,
+        MESH_OUTPUTS,
+        MODEL_CHOICES,
+        MOTION_CHOICES,
+    )
+    from garsim.data.sample import FABRICS, GARMENT_TYPES
     from garsim.export import SUPPORTED_EXTENSIONS
     from garsim.geometry.io import SUPPORTED_EXTENSIONS as MESH_EXTENSIONS
     from garsim.model.baselines import MODELS
 
     assert FABRIC_CHOICES == FABRICS and MOTION_CHOICES == MOTIONS and set(MODEL_CHOICES) == set(MODELS)
+    assert FAMILY_CHOICES == GARMENT_TYPES
     assert set(ANIMATION_OUTPUTS) == set(SUPPORTED_EXTENSIONS)
     assert set(MESH_OUTPUTS) == set(MESH_EXTENSIONS) - {".gltf"} and set(MESH_INPUTS) == set(MESH_EXTENSIONS)
 
@@ -646,3 +655,15 @@ def test_train_and_eval_the_deepsd_baseline_from_the_cli(tmp_path, capsys):
     assert main(["eval", "--data", fixture, "--model", str(run / "best"), "--splits", "test"]) == 0
     out = capsys.readouterr().out
     assert "deepsd" in out and "prior" in out and "nearest" in out
+
+
+def test_train_on_some_families_only(tmp_path):
+    """`garsim train --families` trains and validates on those families (the fixture's one skirt job: no validation)."""
+    from pathlib import Path
+
+    fixture = str(Path(__file__).parent / "fixtures" / "dataset_v2")
+    run = tmp_path / "run"
+    args = ["train", "--data", fixture, "--out", str(run), "--families", "skirt", "top", "--epochs", "1"]
+    assert main([*args, "--val-every", "2", "--quiet"]) == 0
+    assert json.loads((run / "sequences.json").read_text()) == {"train": ["train-00006"], "val": []}
+    assert (run / "best" / "model.safetensors").exists()

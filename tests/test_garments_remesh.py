@@ -7,7 +7,7 @@ import pytest
 
 from garsim.bodies.anny import AnnyBody
 from garsim.garments.garment import Garment
-from garsim.garments.remesh import BarycentricMap, decimate, transfer_barycentric
+from garsim.garments.remesh import BarycentricMap, decimate, subdivide, transfer_barycentric
 from garsim.garments.templates import TemplateBody, make_garment
 from garsim.geometry.mesh import border_loops
 
@@ -55,3 +55,38 @@ def test_decimate_bad_ratio():
     g = Garment(np.eye(3), np.array([[0, 1, 2]]), np.zeros(3, bool), "skirt")
     with pytest.raises(ValueError, match="ratio"):
         decimate(g, 0.0)
+
+
+def test_subdivide_splits_every_triangle_at_its_edge_midpoints():
+    """Two triangles sharing an edge: 4 + 5 vertices (one midpoint per edge), 8 faces that keep the orientation and
+    tile the same surface (per-vertex data is carried linearly, so a plane stays the plane)."""
+    v = np.array([[0.0, 0.0, 0.0], [2.0, 0.0, 0.0], [0.0, 2.0, 0.0], [2.0, 2.0, 0.0]])
+    faces = np.array([[0, 1, 2], [1, 3, 2]])
+    fine, mapping = subdivide(faces, 4)
+    fv = transfer_barycentric(v, mapping)
+    assert fine.shape == (8, 3) and len(fv) == 9 and fine.max() == 8
+    np.testing.assert_allclose(fv[:4], v)
+    assert {tuple(p) for p in fv[4:, :2]} == {(1.0, 0.0), (0.0, 1.0), (1.0, 1.0), (2.0, 1.0), (1.0, 2.0)}
+    normals = np.cross(fv[fine[:, 1]] - fv[fine[:, 0]], fv[fine[:, 2]] - fv[fine[:, 0]])
+    np.testing.assert_allclose(normals, [[0.0, 0.0, 1.0]] * 8)  # area 0.5 each (a quarter of 2), facing +Z
+    e = np.sort(np.concatenate([fine[:, [0, 1]], fine[:, [1, 2]], fine[:, [2, 0]]]), axis=1)
+    assert len(np.unique(e, axis=0)) == 16  # 2 x 5 halves of the coarse edges + 3 x 2 inner edges
+    np.testing.assert_allclose(transfer_barycentric(v[:, 0] * 3.0 - v[:, 1], mapping), fv[:, 0] * 3.0 - fv[:, 1])
+
+
+def test_decimating_a_subdivided_garment_leaves_no_zero_area_face():
+    """Collapses between the collinear vertices of a subdivided mesh made zero-area faces that every mesh check
+    refuses (the API's ``max_vertices`` path on a subdivided garment); they are dropped."""
+    from pathlib import Path
+
+    from garsim.data.store import DatasetStore
+    from garsim.geometry.io import validate_mesh, zero_area_faces
+
+    store = DatasetStore(Path(__file__).parent / "fixtures" / "dataset_v2")
+    level = store.read_sequence(next(e for e in store.entries() if e["id"] == "test-00040")).levels["low"]
+    faces, mapping = subdivide(level.faces, len(level.template))
+    fine = Garment(transfer_barycentric(level.template, mapping), faces, np.zeros(len(mapping.weights), bool), "skirt")
+    low, back = decimate(fine, len(level.template) / len(fine.vertices))
+    assert not zero_area_faces(low.vertices, low.faces).any() and np.unique(low.faces).size == len(low.vertices)
+    validate_mesh(low.vertices, low.faces)
+    np.testing.assert_allclose(transfer_barycentric(fine.vertices.astype(np.float64), back), low.vertices, atol=1e-6)

@@ -46,3 +46,24 @@ def test_rest_samples_teach_a_still_body_to_leave_the_template(tmp_path):
         np.testing.assert_array_equal(s.target, s.garment)
         np.testing.assert_array_equal(s.prior, s.garment)
     assert len(train_val_samples(tmp_path, "low", val_every=3, rest=False)[0]) == 4
+
+
+def test_families_and_fraction_pick_whole_jobs(tmp_path):
+    store = DatasetStore(tmp_path)
+    for i in range(8):
+        rec = make_record(f"train-{i}", "train", k=1, seed=i)
+        rec.garment_type = ("skirt", "top", "dress", "trousers")[i % 4]
+        store.append_manifest(store.write_sequence(rec))
+
+    def ids(**kw) -> tuple[set[str], set[str]]:
+        return tuple({s.meta["seq_id"] for s in part} for part in train_val_samples(tmp_path, **kw))
+
+    # jobs 0, 1, 4, 5 are skirts and tops; every 2nd of them is held out
+    assert ids(val_every=2, families=["skirt", "top"]) == ({"train-0", "train-4"}, {"train-1", "train-5"})
+    with pytest.raises(ValueError, match="unknown garment families"):
+        train_val_samples(tmp_path, families=["cape"])
+    parts = {f: ids(val_every=4, fraction=f) for f in (0.2, 0.5, 1.0)}
+    assert [len(parts[f][0]) for f in (0.2, 0.5, 1.0)] == [1, 3, 6]
+    assert parts[0.2][0] < parts[0.5][0] < parts[1.0][0]  # nested subsets of whole jobs
+    assert parts[0.2][1] == parts[1.0][1] == {"train-3", "train-7"}  # validation unchanged
+    assert ids(val_every=4, fraction=0.5, seed=1)[0] != parts[0.5][0]

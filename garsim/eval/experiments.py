@@ -60,6 +60,7 @@ def evaluate_split(
     collision_margin: float | None = 0.002,
     refine: bool = False,
     name: str = "garsim",
+    baselines: bool = True,
 ) -> dict[str, dict[str, dict[str, float]]]:
     """Mean metrics per garment type (and 'all') for the model and for the baselines.
 
@@ -69,19 +70,19 @@ def evaluate_split(
     vertex) and "ground truth" (the simulation itself: the reference for normal consistency, smoothness and
     the collision counts, which flag some simulated cloth too on a coarse body mesh); with ``refine`` also
     ``name+refine`` and "prior+refine" (``garsim.refine`` after the network / after the prior alone).
-    Metrics: ``garsim.eval.metrics.GarmentMetrics``; a post-processed row leaves out the collision metrics its
-    post-process enforces (``POSTPROCESS_OPTIMISES``). Where the split holds animations (>= 3 consecutive
-    dynamic frames of a sequence) every row also has ``jitter_mm`` (mean over them) and ``sequences``.
+    ``baselines=False`` leaves out the prior, nearest and ground-truth rows (several models scored beside one
+    set of them). Metrics as ``score_predictions``.
     """
     samples = DatasetStore(data_dir).samples(split, resolution)
     if not samples:
         raise ValueError(f"{data_dir}: no {split!r} samples to evaluate")
-    results: dict[str, dict[str, dict[str, float]]] = {}
-    predictions = {
-        "prior": _predict_all(None, samples),
-        "nearest": [nearest_vertex_drape(s) for s in samples],
-        "ground truth": [s.target for s in samples],
-    }
+    predictions: dict[str, list[np.ndarray]] = {}
+    if baselines:
+        predictions = {
+            "prior": _predict_all(None, samples),
+            "nearest": [nearest_vertex_drape(s) for s in samples],
+            "ground truth": [s.target for s in samples],
+        }
     if model is not None:
         predictions[name] = _predict_all(model, samples)
         if collision_margin is not None:
@@ -90,8 +91,22 @@ def evaluate_split(
             ]
         if refine:
             predictions[f"{name}+refine"] = [postprocess(p, s) for p, s in zip(predictions[name], samples)]
-    if refine:
+    if refine and baselines:
         predictions["prior+refine"] = [postprocess(p, s) for p, s in zip(predictions["prior"], samples)]
+    return score_predictions(samples, predictions)
+
+
+def score_predictions(
+    samples: list[Sample], predictions: dict[str, list[np.ndarray]]
+) -> dict[str, dict[str, dict[str, float]]]:
+    """{method: {garment_type: {metric: mean, "frames": n}}} (and 'all') of each method's predictions of the samples.
+
+    Metrics: ``garsim.eval.metrics.GarmentMetrics``; a method named ``base+post`` (a post-processed row) leaves
+    out the collision metrics its post-process enforces (``POSTPROCESS_OPTIMISES``). Where the samples hold
+    animations (>= 3 consecutive dynamic frames of a sequence) every row also has ``jitter_mm`` (mean over them)
+    and ``sequences``. Methods are ordered models first, then "prior", "nearest", "ground truth".
+    """
+    results: dict[str, dict[str, dict[str, float]]] = {}
     animations = _animations(samples)
     for method in sorted(predictions, key=lambda k: (k in ("prior", "nearest", "ground truth"), k)):
         preds = predictions[method]

@@ -1,4 +1,5 @@
-"""Garment decimation (fast-simplification, borders kept) and barycentric transfer between resolutions."""
+"""Garment decimation (fast-simplification, borders kept), midpoint subdivision, and barycentric transfer between
+resolutions."""
 
 from __future__ import annotations
 
@@ -7,6 +8,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from garsim.garments.garment import Garment
+from garsim.geometry.io import zero_area_faces
 from garsim.geometry.mesh import boundary_edges
 
 
@@ -103,16 +105,19 @@ def decimate(garment: Garment, ratio: float = 0.25) -> tuple[Garment, Barycentri
         v_low, f_low = fast_simplification.simplify(v, f, target_count=target, preserve_border=True)
     else:
         v_low, f_low = v.copy(), f.astype(np.int64)
-    # drop vertices the simplifier left unreferenced
+    mapping = barycentric_map(v_low, v, garment.faces)
+    # snap the low-res vertices onto the full-res surface (quadric placement moves them off it by ~mm),
+    # so the low-res garment is exactly the barycentric transfer of the full-res one
+    v_low = np.einsum("mk,mkd->md", mapping.weights, v[mapping.triangles])
+    # drop zero-area faces (collapses between collinear vertices, e.g. of a subdivided mesh), then the vertices
+    # left unreferenced
+    f_low = f_low[~zero_area_faces(v_low.astype(np.float32), f_low)]
     used = np.unique(f_low)
     remap = np.full(len(v_low), -1, dtype=np.int64)
     remap[used] = np.arange(len(used))
     v_low, f_low = v_low[used], remap[f_low]
-    mapping = barycentric_map(v_low, v, garment.faces)
-    tris, bary = mapping.triangles, mapping.weights
-    # snap the low-res vertices onto the full-res surface (quadric placement moves them off it by ~mm),
-    # so the low-res garment is exactly the barycentric transfer of the full-res one
-    v_low = np.einsum("mk,mkd->md", bary, v[tris])
+    tris, bary = mapping.triangles[used], mapping.weights[used]
+    mapping = BarycentricMap(tris, bary)
     # pinned mask: carried over from the nearest original vertex of the closest triangle
     nearest = tris[np.arange(len(tris)), np.argmax(bary, axis=1)]
     pinned = garment.pinned[nearest]
@@ -133,6 +138,24 @@ def transfer_barycentric(values_full: np.ndarray, mapping: BarycentricMap) -> np
     gathered = values[mapping.triangles]  # (M, 3, ...)
     w = mapping.weights.reshape(mapping.weights.shape + (1,) * (values.ndim - 1))
     return (gathered * w).sum(axis=1).astype(values.dtype if values.dtype.kind == "f" else np.float64)
+
+
+def subdivide(faces: np.ndarray, num_vertices: int) -> tuple[np.ndarray, BarycentricMap]:
+    """Midpoint subdivision (each triangle into four, orientation kept): the fine faces and the coarse -> fine map.
+
+    The fine mesh's vertices are the ``num_vertices`` coarse ones followed by one midpoint per edge, so
+    ``transfer_barycentric`` carries any per-vertex data (positions, priors, ground truth) onto it; piecewise-linear
+    data keeps its surface exactly (a simulated garment is the same surface, sampled twice as densely)."""
+    f = np.asarray(faces, np.int64)
+    edges = np.sort(f[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1)
+    unique, inverse = np.unique(edges, axis=0, return_inverse=True)
+    m01, m12, m20 = (num_vertices + inverse.reshape(-1, 3)).T
+    a, b, c = f.T
+    fine = np.concatenate([np.stack(t, axis=1) for t in ((a, m01, m20), (m01, b, m12), (m20, m12, c), (m01, m12, m20))])
+    own = np.arange(num_vertices)
+    triangles = np.concatenate([np.stack([own, own, own], axis=1), np.column_stack([unique, unique[:, 0]])])
+    weights = np.concatenate([np.tile([1.0, 0.0, 0.0], (num_vertices, 1)), np.tile([0.5, 0.5, 0.0], (len(unique), 1))])
+    return fine, BarycentricMap(triangles, weights)
 
 
 def border_vertex_count(faces: np.ndarray) -> int:

@@ -90,6 +90,15 @@ def _as_array(x: Any, name: str, what: str) -> np.ndarray:
         raise MeshError(f"{name}: {what} ({_first_line(exc)})") from None
 
 
+def zero_area_faces(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """(F,) mask of the faces whose area is below ``DEGENERATE_AREA_RTOL`` x the squared bounding-box diagonal."""
+    v = np.asarray(vertices, np.float64)
+    f = np.asarray(faces, np.int64)
+    area2 = np.linalg.norm(np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]]), axis=1)
+    diag2 = float(np.sum((v.max(axis=0) - v.min(axis=0)) ** 2))
+    return area2 <= 2.0 * DEGENERATE_AREA_RTOL * max(diag2, 1e-30)
+
+
 def validate_mesh(vertices: Any, faces: Any, name: str = "mesh") -> tuple[np.ndarray, np.ndarray]:
     """Check and normalise a triangle mesh -> (float32 (V, 3) vertices, int64 (F, 3) faces).
 
@@ -155,9 +164,7 @@ def validate_mesh(vertices: Any, faces: Any, name: str = "mesh") -> tuple[np.nda
             f"{name}: {len(rows)} degenerate faces repeat a vertex index (first face {int(rows[0])}: "
             f"{f[rows[0]].tolist()}); remove them (e.g. trimesh's update_faces(nondegenerate_faces()))"
         )
-    area2 = np.linalg.norm(np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]]), axis=1)
-    diag2 = float(np.sum((v.max(axis=0) - v.min(axis=0)) ** 2))
-    zero = area2 <= 2.0 * DEGENERATE_AREA_RTOL * max(diag2, 1e-30)
+    zero = zero_area_faces(v, f)
     if zero.any():
         rows = np.flatnonzero(zero)
         raise MeshError(

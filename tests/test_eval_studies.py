@@ -1,0 +1,143 @@
+"""Every study of ``garsim.eval.studies`` and its driver ``examples/experiments.py`` on the committed fixture, with a
+tiny model trained for one epoch: the code paths, not the numbers."""
+
+import importlib.util
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from garsim.data.store import DatasetStore
+from garsim.eval.studies import (
+    StudyConfig,
+    data_scaling,
+    family_table,
+    generalisation,
+    heads_and_steps,
+    resolution_levels,
+    subdivide_level,
+    train_variant,
+)
+from garsim.model.config import GarSimConfig
+from garsim.train.trainer import TrainConfig
+
+FIXTURE = Path(__file__).parent / "fixtures" / "dataset_v2"
+SMALL = GarSimConfig(latent=32, edge_latent=16, mlp_hidden=32, num_steps=2)
+BASELINES = {"prior", "nearest", "ground truth"}
+TEST_FAMILIES = {"all", "skirt", "top", "longsleeve", "trousers", "dress"}
+
+
+def _study(folder: Path, **train) -> StudyConfig:
+    cfg = TrainConfig(out_dir=str(folder), epochs=1, batch_size=2, warmup_steps=1, progress=False, **train)
+    return StudyConfig(str(FIXTURE), cfg, SMALL, val_every=2)
+
+
+def test_a_variant_is_trained_once_and_keyed_by_what_decides_it(tmp_path):
+    model, info = train_variant(_study(tmp_path))
+    again, same = train_variant(_study(tmp_path, threads=2))  # threads do not change what is learnt: reused
+    assert same == info and (info["train_sequences"], info["val_sequences"]) == (2, 2)
+    assert len((Path(info["dir"]).parent / "log.csv").read_text().splitlines()) == 2  # header + one epoch, not two
+    assert all(np.array_equal(a, b) for a, b in zip(model.state_dict().values(), again.state_dict().values()))
+    assert train_variant(_study(tmp_path, seed=1))[1]["dir"] != info["dir"]
+
+
+def test_heads_and_message_passing_steps(tmp_path):
+    out = heads_and_steps(_study(tmp_path), steps=(0, 1))
+    labels = [f"{h}, L=2" for h in ("direction_magnitude", "displacement", "position")]
+    labels += ["direction_magnitude, L=0", "direction_magnitude, L=1"]
+    assert list(out["results"]) == [*labels, "ground truth", "nearest", "prior"]
+    assert all(set(per) == TEST_FAMILIES for per in out["results"].values())
+    assert (
+        json.loads((Path(out["models"]["direction_magnitude, L=0"]["dir"]) / "config.json").read_text())["num_steps"]
+        == 0
+    )
+    table = family_table(out["results"])
+    assert table.splitlines()[0] == "| euclidean_mm | all | dress | longsleeve | skirt | top | trousers |"
+    assert "| position, L=2 | " in table
+    json.dumps(out)  # the result is JSON-able as it is
+
+
+def test_generalisation_trains_on_the_seen_families_only(tmp_path):
+    out = generalisation(_study(tmp_path))
+    seen, every = out["models"]["trained on skirt and top"], out["models"]["trained on all families"]
+    assert (seen["train_sequences"], seen["val_sequences"]) == (1, 0)  # the fixture's one skirt job, no top
+    assert every["train_sequences"] == 2 and set(out["results"]) == {*out["models"], *BASELINES}
+    assert "skirt (trained on)" in family_table(out["results"], seen=out["seen"])
+
+
+def test_data_scaling_with_the_external_check(tmp_path):
+    fake = tmp_path / "check.py"
+    fake.write_text(
+        "import json, sys, pathlib\n"
+        "args = dict(zip(sys.argv[1::2], sys.argv[2::2]))\n"
+        "assert (pathlib.Path(args['--model']) / 'model.safetensors').exists()\n"
+        "summary = {'all': {'n': 1, 'prior': {'euclid_mm': 2.0}, 'pred': {'euclid_mm': 1.0}}}\n"
+        "json.dump({'summary': summary}, open(args['--json'], 'w'))\n"
+    )
+    out = data_scaling(_study(tmp_path / "run"), fractions=(0.5, 1.0), external=fake)
+    sizes = {k: v["train_sequences"] for k, v in out["models"].items()}
+    assert sizes == {"50% of the training jobs": 1, "100% of the training jobs": 2}
+    assert set(out["external"]) == set(sizes) and out["external"]["50% of the training jobs"]["all"]["n"] == 1
+
+
+def test_subdivided_levels_carry_the_simulated_surface():
+    rec = next(DatasetStore(FIXTURE).sequences("test"))
+    low = rec.levels["low"]
+    fine = subdivide_level(low)
+    n = len(low.template)
+    np.testing.assert_array_equal(fine.template[:n], low.template)
+    np.testing.assert_array_equal(fine.targets[:, :n], low.targets)
+    assert fine.priors.shape == fine.targets.shape == (len(low.targets), len(fine.template), 3)
+    a, b = fine.faces[len(low.faces) :][:1].T[:2]  # the 2nd block of faces: (m01, b, m12): b is an old vertex
+    assert (b < n).all() and (a >= n).all()
+    assert fine.pinned[:n].tolist() == low.pinned.tolist() and fine.pinned[n:].sum() <= low.pinned.sum()
+    levels = resolution_levels(rec, (1, 2, 4))
+    assert levels[1] is low and len(levels[4].template) == len(subdivide_level(levels[2]).template)
+    with pytest.raises(ValueError, match="powers of 2"):
+        resolution_levels(rec, (3,))
+
+
+@pytest.fixture(scope="module")
+def driver():
+    spec = importlib.util.spec_from_file_location(
+        "experiments", Path(__file__).parents[1] / "examples" / "experiments.py"
+    )
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+@pytest.fixture(scope="module")
+def driver_args(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("studies")
+    SMALL.to_json(folder / "small.json")
+    common = ["--data", str(FIXTURE), "--out", str(folder), "--budget", "1", "--val-every", "2"]
+    return folder, [*common, "--config", str(folder / "small.json"), "--quiet"]
+
+
+def test_driver_resolution(driver, driver_args):
+    folder, args = driver_args
+    assert driver.main(["resolution", *args, "--factors", "1", "2"]) == 0
+    out = json.loads((folder / "resolution.json").read_text())
+    assert list(out["levels"]) == ["1", "2"] and 1.7 < out["levels"]["2"]["linear_factor"] < 2.05
+    res = out["results"]
+    assert set(res) == {f"{m} @ {f}x" for m in ("network", "network, decimated", "prior") for f in (1, 2)}
+    assert res["network @ 1x"] == res["network, decimated @ 1x"]  # the training resolution needs no decimation
+    assert res["prior @ 2x"]["all"]["euclidean_mm"] == pytest.approx(res["prior @ 1x"]["all"]["euclidean_mm"], rel=0.2)
+    text = (folder / "resolution.md").read_text()
+    assert "`python examples/experiments.py resolution --data" in text and "| network, decimated @ 2x |" in text
+
+
+def test_driver_corrections(driver, driver_args):
+    folder, args = driver_args
+    assert driver.main(["corrections", *args, "--size", "64"]) == 0
+    rows = json.loads((folder / "corrections.json").read_text())["samples"]
+    assert {r["garment"] for r in rows} == TEST_FAMILIES - {"all"}
+    assert all(Path(r["png"]).stat().st_size > 0 and r["network_max_mm"] >= r["network_mean_mm"] for r in rows)
+    samples = {s.meta["name"]: s for s in DatasetStore(FIXTURE).samples("test")}
+    for r in rows:
+        s = samples[r["sample"]]
+        assert r["simulation_mean_mm"] == pytest.approx(1000 * np.linalg.norm(s.target - s.prior, axis=1).mean())
+    assert len(list((folder / "models").iterdir())) == 1  # the base model, trained by `resolution`, reused
+    assert "corrections/" in (folder / "corrections.md").read_text()
