@@ -27,7 +27,8 @@ test: $(STAMP)
 test-all: $(STAMP)
 	$(VENV)/bin/python -m pytest -q -m ""
 
-# The results report (docs/results.md and its figures) from the dataset, a training run and the model:
+# The results report (docs/results.md and its figures) from the dataset, the model and its training run (when
+# RUN exists; otherwise docs/training_curve.png is kept):
 #   make results DATA=~/garsim-data/v2 RUN=~/garsim-runs/v1 MODEL=garsim/weights
 DATA ?= $(HOME)/garsim-data/v2
 RUN ?= $(HOME)/garsim-runs/v1
@@ -39,5 +40,5 @@ results: $(STAMP)
 	  $(VENV)/bin/python $(EXTERNAL) --model $(MODEL) --json docs/external_default.json && \
 	  $(VENV)/bin/python examples/external_check.py --model $(MODEL) --raw --json docs/external_raw.json; fi
 	$(VENV)/bin/garsim bench --model $(MODEL) --out docs/bench.json
-	$(VENV)/bin/python examples/make_report.py --run $(RUN) --model $(MODEL) --data $(DATA) \
+	$(VENV)/bin/python examples/make_report.py --run $(wildcard $(RUN)) --model $(MODEL) --data $(DATA) \
 	  --results docs/results.json --external $(wildcard docs/external_default.json docs/external_raw.json)

@@ -38,7 +38,9 @@ def _external_table(paths: list[Path]) -> str:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__)
-    parser.add_argument("--run", required=True, nargs="+", help="training run folder(s) (log.csv), stages in order")
+    parser.add_argument(
+        "--run", nargs="*", default=[], help="training run folder(s) (log.csv), stages in order; none: keep the curve"
+    )
     parser.add_argument("--model", default=None, help="model folder (default: the shipped model)")
     parser.add_argument("--data", required=True)
     parser.add_argument("--results", required=True, help="JSON written by `garsim eval --refine --out`")
@@ -47,7 +49,9 @@ def main() -> None:
     parser.add_argument("--samples", type=int, default=6)
     args = parser.parse_args()
     docs = Path(args.docs)
-    curve = plot_training_curve([Path(r) / "log.csv" for r in args.run], docs / "training_curve.png")
+    curve = docs / "training_curve.png"
+    if args.run:
+        plot_training_curve([Path(r) / "log.csv" for r in args.run], curve)
     results = json.loads(Path(args.results).read_text())
     sim = GarSim.load(args.model) if args.model else GarSim.pretrained()
     store = DatasetStore(args.data)
