@@ -150,3 +150,18 @@ def test_direction_and_magnitude_terms_by_hand():
     _, terms = garsim_loss(g.target, g, LossWeights(dir=0.5), direction=opposite, magnitude=m)
     expected = 0.5 * 0.8 / 0.7 + 0.01 * terms["sm"].item() + 1e-4 * terms["nc"].item()
     assert terms["total"].item() == pytest.approx(expected)
+
+
+def test_nearest_in_graph_indexes_each_body_once():
+    """Two graphs' bodies, queried twice (two training steps): the right per-graph nearest indices, and each body's
+    KD-tree is built once (the second step finds both in the training cache)."""
+    from garsim.train.losses import _BODY_TREES, nearest_in_graph
+
+    _BODY_TREES.clear()
+    refs = np.array([[0.0, 0, 0], [1, 0, 0], [10, 0, 0], [11, 0, 0]])
+    ref_graph = np.array([0, 0, 1, 1])
+    points = np.array([[0.9, 0, 0], [0.1, 0, 0], [0.2, 0, 0]])  # the last belongs to graph 1: nearest is [10, 0, 0]
+    point_graph = np.array([0, 0, 1])
+    for _ in range(2):
+        np.testing.assert_array_equal(nearest_in_graph(points, point_graph, refs, ref_graph, 2), [1, 0, 2])
+    assert len(_BODY_TREES) == 2

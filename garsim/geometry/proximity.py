@@ -12,11 +12,11 @@ from garsim.geometry.cache import ContentCache, content_key
 _TREE_CACHE = ContentCache(8)
 
 
-def cached_tree(points: np.ndarray) -> cKDTree:
-    """KD-tree over ``points``, cached by content, so a body reused across garments and frames is
-    indexed once and an edited array never hits a stale tree."""
+def cached_tree(points: np.ndarray, cache: ContentCache = _TREE_CACHE) -> cKDTree:
+    """KD-tree over ``points``, cached by content (in ``cache``: training keeps its own, larger one), so a body
+    reused across garments, frames or epochs is indexed once and an edited array never hits a stale tree."""
     arr = np.ascontiguousarray(points)
-    return _TREE_CACHE.get(content_key(arr), lambda: cKDTree(arr))
+    return cache.get(content_key(arr), lambda: cKDTree(arr))
 
 
 def nearest_vertices(points: np.ndarray, vertices: np.ndarray, k: int = 1) -> tuple[np.ndarray, np.ndarray]:
