@@ -14,8 +14,6 @@ import socket
 import tempfile
 from pathlib import Path
 
-import numpy as np
-
 
 def make_scene(path: Path, frames: int, vertices: int) -> Path:
     """The demo's walk animation of the dress on the slim body: prediction, prior and body per frame -> an .npz."""
@@ -23,6 +21,7 @@ def make_scene(path: Path, frames: int, vertices: int) -> Path:
     from garsim.bodies.anny import AnnyBody
     from garsim.bodies.poses import batched_matrices, motion, stack_poses
     from garsim.demo import ANIMATED, DEMO_BODIES, DEMO_GARMENTS, _build_garment
+    from garsim.view import ViewData
 
     body_name, kind, motion_name = ANIMATED
     fabric, construction = DEMO_GARMENTS[kind]
@@ -33,16 +32,7 @@ def make_scene(path: Path, frames: int, vertices: int) -> Path:
     mesh = (garment.vertices, garment.faces)
     draped = GarSim.default().drape_sequence(canonical, targets, mesh, fabric=fabric)
     prior = GarSim.prior_only().drape_sequence(canonical, targets, mesh, fabric=fabric)
-    np.savez_compressed(
-        path,
-        frames=draped.astype(np.float32),
-        faces=garment.faces.astype(np.int64),
-        body_frames=np.asarray(targets, dtype=np.float32),
-        body_faces=body.faces.astype(np.int64),
-        prior_frames=prior.astype(np.float32),
-        fps=np.float32(24),
-    )
-    return path
+    return ViewData(draped, garment.faces, targets, body.faces, prior, fps=24.0, name=path.name).save_npz(path)
 
 
 def main() -> None:

@@ -85,6 +85,7 @@ def run_demo(config: DemoConfig, log: Callable[[str], Any] = print) -> list[Path
     from garsim.export import export_animation
     from garsim.geometry.io import save_mesh
     from garsim.geometry.render import render_grid
+    from garsim.view import ViewData
 
     if config.frames < 2:
         raise ValueError(f"the animation needs at least 2 frames, got --frames {config.frames}")
@@ -157,16 +158,8 @@ def run_demo(config: DemoConfig, log: Callable[[str], Any] = print) -> list[Path
         written += export_animation(
             stem.with_suffix(ext), frames, garment.faces, body_frames=targets, body_faces=body.faces, fps=config.fps
         )
-    npz = stem.with_suffix(".npz")
-    np.savez_compressed(
-        npz,
-        frames=frames.astype(np.float32),
-        faces=garment.faces.astype(np.int64),
-        body_frames=np.asarray(targets, dtype=np.float32),
-        body_faces=body.faces.astype(np.int64),
-        prior_frames=prior.astype(np.float32),
-        fps=np.float32(config.fps),
-    )
+    view = ViewData(frames, garment.faces, targets, body.faces, prior, fps=config.fps, name=stem.name)
+    npz = view.save_npz(stem.with_suffix(".npz"))
     written.append(npz)
     log(
         f"exported the animation (GLB, USDC, GIF, NPZ) in {time.perf_counter() - t0:.1f} s; "

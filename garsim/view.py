@@ -24,6 +24,8 @@ from typing import Any
 
 import numpy as np
 
+from garsim.geometry.mesh import vertex_normals
+
 VIEWER_NEEDS = "garsim view needs viser: pip install 'garsim[view]'"
 GARMENT_RGB = (0.23, 0.46, 0.69)
 BODY_RGB = (200, 200, 200)
@@ -77,6 +79,14 @@ class ViewData:
     @property
     def num_frames(self) -> int:
         return int(self.frames.shape[0])
+
+    def save_npz(self, path: str | Path) -> Path:
+        """Write the sequence as the ``.npz`` that ``load_npz`` (and ``garsim view``) reads; returns the path."""
+        p = Path(path)
+        arrays = {"frames": self.frames, "faces": self.faces, "fps": np.float32(self.fps)}
+        optional = {"body_frames": self.body_frames, "body_faces": self.body_faces, "prior_frames": self.prior_frames}
+        np.savez_compressed(p, **arrays, **{k: v for k, v in optional.items() if v is not None})
+        return p
 
     def correction(self) -> np.ndarray | None:
         """|prediction - prior| per frame and vertex (T, N), metres; None without a prior."""
@@ -316,16 +326,6 @@ def load_view_data(path: str | Path) -> ViewData:
 # ----------------------------------------------------------------------------- the viewer
 
 
-def vertex_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
-    v = vertices.astype(np.float64)
-    fn = np.cross(v[faces[:, 1]] - v[faces[:, 0]], v[faces[:, 2]] - v[faces[:, 0]])
-    n = np.zeros_like(v)
-    for k in range(3):
-        np.add.at(n, faces[:, k], fn)
-    length = np.linalg.norm(n, axis=1, keepdims=True)
-    return (n / np.where(length > 0, length, 1.0)).astype(np.float32)
-
-
 def colored_glb(vertices: np.ndarray, faces: np.ndarray, rgb: np.ndarray) -> bytes:
     """A one-mesh GLB with per-vertex colours (float RGB in [0, 1]), smooth normals, double-sided."""
     from garsim.export.gltf import _ARRAY_BUFFER, _ELEMENT_ARRAY_BUFFER, _Builder, _glb
@@ -333,7 +333,7 @@ def colored_glb(vertices: np.ndarray, faces: np.ndarray, rgb: np.ndarray) -> byt
     b = _Builder()
     attributes = {
         "POSITION": b.add(vertices.astype(np.float32), "VEC3", _ARRAY_BUFFER, bounds=True),
-        "NORMAL": b.add(vertex_normals(vertices, faces), "VEC3", _ARRAY_BUFFER),
+        "NORMAL": b.add(vertex_normals(vertices.astype(np.float64), faces).astype(np.float32), "VEC3", _ARRAY_BUFFER),
         "COLOR_0": b.add(np.clip(rgb, 0.0, 1.0).astype(np.float32), "VEC3", _ARRAY_BUFFER),
     }
     indices = b.add(faces.astype(np.uint32).ravel(), "SCALAR", _ELEMENT_ARRAY_BUFFER)
