@@ -309,22 +309,23 @@ class GarSim:
     @classmethod
     def pretrained(cls, **options: Any) -> GarSim:
         """The model shipped inside the package (``garsim/weights``); ``options`` as ``GarSim(...)``."""
-        from garsim.model.garsim import WEIGHTS_FILE, GarSimModel
+        from garsim.model.runtime import load_for_inference
+        from garsim.model.weights import WEIGHTS_FILE
 
         if not (WEIGHTS_DIR / WEIGHTS_FILE).exists():
             raise FileNotFoundError(
                 f"no pretrained weights at {WEIGHTS_DIR / WEIGHTS_FILE}: this build ships no trained model; "
                 "use GarSim.prior_only() (or `garsim drape --prior-only`)"
             )
-        return cls(model=GarSimModel.load(WEIGHTS_DIR), **options)
+        return cls(model=load_for_inference(WEIGHTS_DIR), **options)
 
     @classmethod
     def load(cls, directory: str | Path, **options: Any) -> GarSim:
         """A model saved by training (model.safetensors + config.json: GarSim or the DeePSD-style baseline);
-        ``options`` as ``GarSim(...)``."""
-        from garsim.model.baselines import load_model
+        ``options`` as ``GarSim(...)``. GarSim runs on the numpy runtime (``garsim.model.runtime``, no torch)."""
+        from garsim.model.runtime import load_for_inference
 
-        return cls(model=load_model(directory), **options)
+        return cls(model=load_for_inference(directory), **options)
 
     @classmethod
     def default(cls) -> GarSim:

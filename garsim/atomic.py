@@ -40,3 +40,31 @@ def atomic_write(path: str | os.PathLike, write: Callable[[str], None]) -> Path:
 def atomic_write_bytes(path: str | os.PathLike, data: bytes) -> Path:
     """Write ``data`` to ``path`` atomically."""
     return atomic_write(path, lambda tmp: Path(tmp).write_bytes(data))
+
+
+class OutputError(ValueError):
+    """An output path that cannot be written; the one-line message says what to fix."""
+
+
+def check_writable_folder(folder: str | os.PathLike, label: str | None = None) -> Path:
+    """Fail early when files cannot be created in ``folder`` (it or its nearest existing ancestor).
+
+    The check creates and removes a probe file (``os.access`` lies for root and read-only mounts);
+    missing folders are not created here, only later by the atomic write.
+    """
+    folder = Path(folder) if str(folder) else Path(".")
+    label = label or str(folder)
+    probe_dir = folder
+    while not probe_dir.exists():
+        if probe_dir.parent == probe_dir:
+            break
+        probe_dir = probe_dir.parent
+    if probe_dir.exists() and not probe_dir.is_dir():
+        raise OutputError(f"{label}: cannot create the output folder, {probe_dir} is a file")
+    try:
+        fd, tmp = tempfile.mkstemp(dir=probe_dir, prefix=".garsim-write-probe.")
+        os.close(fd)
+        os.unlink(tmp)
+    except OSError as exc:
+        raise OutputError(f"{label}: the output folder {probe_dir} is not writable ({exc.strerror or exc})") from None
+    return folder

@@ -100,7 +100,7 @@ def _config_default(action: argparse.Action, module: str, cls: str, name: str) -
 
 def _check_output(path: str | os.PathLike, extensions: tuple[str, ...], flag: str) -> Path:
     """Fail before any work when ``path`` has another extension or its folder cannot be written."""
-    from garsim.export._common import check_writable_folder
+    from garsim.atomic import check_writable_folder
 
     p = Path(path)
     ext = p.suffix.lower()
@@ -129,7 +129,7 @@ def _write_json(path: str | Path, obj: object) -> Path:
 
 def _check_folder(path: str | os.PathLike, flag: str = "--out") -> Path:
     """Fail before any work when files cannot be written in the folder ``path`` (created later if missing)."""
-    from garsim.export._common import check_writable_folder
+    from garsim.atomic import check_writable_folder
 
     p = Path(path)
     if p.exists() and not p.is_dir():
@@ -507,9 +507,20 @@ def cmd_bench(args: argparse.Namespace) -> int:
         _check_output(args.out, (".json",), "--out")
     from garsim.api import GarSim
     from garsim.eval.bench import bench_inference, bench_newton, format_bench
+    from garsim.model.runtime import GarSimRuntime
 
     sim = GarSim.load(args.model) if args.model else GarSim.pretrained()
-    report: dict = {"garsim": bench_inference(sim.model, args.sizes, repeats=args.repeats, garment=args.garment)}
+    reference = None
+    if isinstance(sim.model, GarSimRuntime):  # the same weights in torch: the forward's speed-up in this run
+        from garsim.api import WEIGHTS_DIR
+        from garsim.model.garsim import GarSimModel
+
+        reference = GarSimModel.load(args.model or WEIGHTS_DIR)
+    report: dict = {
+        "garsim": bench_inference(
+            sim.model, args.sizes, repeats=args.repeats, garment=args.garment, reference=reference
+        )
+    }
     print(format_bench(report["garsim"]))
     paper_s = {600: 0.1, 2400: 1.0}  # the paper's reported inference times (Sec. 5)
     for n, r in report["garsim"].items():

@@ -22,7 +22,7 @@ from garsim.model.baselines import (
 )
 from garsim.model.config import GarSimConfig
 from garsim.model.garsim import GarSimModel, WeightsError
-from garsim.model.inputs import build_graph
+from garsim.model.graph import build_graph
 
 
 def test_prior_baseline_returns_prior():

@@ -11,7 +11,7 @@ from garsim.data.sample import Sample
 from garsim.geometry.skinning import lbs_prior, transfer_weights
 from garsim.model.config import GarSimConfig
 from garsim.model.garsim import GarSimModel
-from garsim.model.inputs import build_graph, collate
+from garsim.model.graph import build_graph, collate
 
 
 def _model(**kw) -> GarSimModel:

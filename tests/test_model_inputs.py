@@ -7,7 +7,8 @@ from model_fixtures import make_sample, rot_z, transform_sample
 
 from garsim.geometry.mesh import face_pairs
 from garsim.model.config import GarSimConfig
-from garsim.model.inputs import body_yaw_frame, build_graph, collate, semantic_vector
+from garsim.model.graph import build_graph, collate
+from garsim.model.inputs import body_yaw_frame, semantic_vector
 
 
 @pytest.fixture(scope="module")
@@ -168,7 +169,7 @@ def test_body_rings_and_caches_follow_content():
 
 def test_collision_normals_equal_full_vertex_normals(sample):
     from garsim.geometry.mesh import vertex_normals
-    from garsim.model.inputs import collision_body
+    from garsim.model.graph import collision_body
 
     col = collision_body(sample)
     full = vertex_normals(sample.body_target, sample.body_faces)

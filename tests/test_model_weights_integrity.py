@@ -10,7 +10,7 @@ import torch
 from garsim.data.store import DatasetStore
 from garsim.model.config import GarSimConfig
 from garsim.model.garsim import CHECKSUM_KEY, CONFIG_FILE, WEIGHTS_FILE, GarSimModel, WeightsError
-from garsim.model.inputs import build_graph
+from garsim.model.graph import build_graph
 
 FIXTURE = Path(__file__).parent / "fixtures" / "dataset_v2"
 SMALL = {

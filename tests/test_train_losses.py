@@ -8,7 +8,7 @@ import torch
 from torch_geometric.data import Batch
 
 from garsim.geometry.mesh import directed_edges, face_pairs
-from garsim.model.inputs import GarmentGraph
+from garsim.model.graph import GarmentGraph
 from garsim.train.losses import (
     LossWeights,
     collision_loss,

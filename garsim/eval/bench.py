@@ -22,16 +22,16 @@ from __future__ import annotations
 
 import time
 from collections.abc import Mapping, Sequence
+from contextlib import contextmanager
 from typing import Any
 
 import numpy as np
-import torch
 
 from garsim.api import GarSim
 from garsim.bodies.prior import garment_prior
 from garsim.data.sample import Sample
 from garsim.geometry.cache import clear_all
-from garsim.model.inputs import build_graph
+from garsim.model.runtime import GarSimRuntime
 
 DEFAULT_POSE: dict[str, list[float]] = {"upperleg01.L": [-0.5, 0.0, 0.0], "upperleg01.R": [0.3, 0.0, 0.0]}
 """Target pose used by the benchmark (a step: one thigh forward, one back), on top of Anny's T-pose."""
@@ -41,6 +41,35 @@ def _timed(fn) -> tuple[Any, float, float]:
     w0, c0 = time.perf_counter(), time.process_time()
     out = fn()
     return out, (time.perf_counter() - w0) * 1000.0, (time.process_time() - c0) * 1000.0
+
+
+def forward(model, graph) -> np.ndarray:
+    """One forward pass of either backend on its own input (``model.make_graph``): the numpy runtime or torch."""
+    if isinstance(model, GarSimRuntime):
+        return model(graph)
+    import torch
+
+    with torch.inference_mode():
+        return model(graph).numpy()
+
+
+@contextmanager
+def _one_thread(model, threads: int):
+    """Torch models in eval mode on ``threads`` threads for the block (numpy's threads: OMP_NUM_THREADS)."""
+    if isinstance(model, GarSimRuntime):
+        yield
+        return
+    import torch
+
+    was_training, old_threads = model.training, torch.get_num_threads()
+    model.eval()
+    torch.set_num_threads(threads)
+    try:
+        yield
+    finally:
+        torch.set_num_threads(old_threads)
+        if was_training:
+            model.train()
 
 
 def drape_once(
@@ -53,10 +82,9 @@ def drape_once(
     sample = Sample(
         canonical.vertices, target.vertices, body.faces, garment_vertices, garment_faces, pinned, prior, fabric, kind
     )
-    graph = build_graph(sample, model.config, loss_inputs=False)
+    graph = model.make_graph(sample, model.config, loss_inputs=False)
     c2 = time.process_time()
-    with torch.inference_mode():
-        pred = model(graph).numpy()
+    pred = forward(model, graph)
     c3 = time.process_time()
     return pred, {"prior_cpu_ms": (c1 - c0) * 1e3, "graph_cpu_ms": (c2 - c1) * 1e3, "forward_cpu_ms": (c3 - c2) * 1e3}
 
@@ -97,12 +125,16 @@ def bench_inference(
     pose: Mapping[str, Sequence[float]] | None = None,
     fabric: str = "cotton",
     threads: int = 1,
+    reference=None,
 ) -> dict[int, dict[str, float]]:
     """Median end-to-end ms (CPU and wall) per garment size on an Anny body, with ``threads`` torch threads.
 
-    ``model`` is a ``GarSimModel``; garments are ``make_garment(garment, body, target_vertices=size)``
-    templates; ``body`` defaults to ``AnnyBody({})``. Returns ``{size: {"vertices", "wall_ms",
-    "cpu_ms", "prior_cpu_ms", "graph_cpu_ms", "forward_cpu_ms", "pose_seq_cpu_ms", "pose_seq_wall_ms",
+    ``model`` is what ``GarSim`` drapes with (the numpy ``GarSimRuntime``, or a torch ``GraphModel``);
+    ``reference`` (optional, e.g. the same weights in torch) adds its forward time as
+    ``reference_forward_cpu_ms``, measured in the same run; garments are
+    ``make_garment(garment, body, target_vertices=size)`` templates; ``body`` defaults to ``AnnyBody({})``.
+    Returns ``{size: {"vertices", "wall_ms", "cpu_ms", "prior_cpu_ms", "graph_cpu_ms", "forward_cpu_ms",
+    "pose_seq_cpu_ms", "pose_seq_wall_ms",
     "first_call_wall_ms", "api_cpu_ms", "repeats"}}`` (medians over ``repeats`` calls after one warm-up;
     ``first_call_wall_ms`` is the very first call, with the body's caches cold; ``pose_seq_*``
     the same garment on ``repeats`` different target poses; ``api_cpu_ms`` ``GarSim.drape`` on mesh pairs;
@@ -125,12 +157,8 @@ def bench_inference(
     ]
     garments = {int(n): make_garment(garment, body, target_vertices=int(n)) for n in sizes}
 
-    was_training = model.training
-    model.eval()
-    old_threads = torch.get_num_threads()
-    torch.set_num_threads(threads)
     results: dict[int, dict[str, float]] = {}
-    try:
+    with _one_thread(model, threads):
         for n, gar in garments.items():
             args = (model, body, canonical, target, gar.vertices, gar.faces, gar.pinned, fabric, garment)
             clear_all()  # cold body: KD-tree, yaw frame and rings are built inside this call
@@ -178,10 +206,13 @@ def bench_inference(
                 **refine_ms,
                 "repeats": int(repeats),
             }
-    finally:
-        torch.set_num_threads(old_threads)
-        if was_training:
-            model.train()
+    if reference is not None:
+        with _one_thread(reference, threads):
+            for n, gar in garments.items():
+                args = (reference, body, canonical, target, gar.vertices, gar.faces, gar.pinned, fabric, garment)
+                drape_once(*args)  # warm-up
+                ms = [drape_once(*args)[1]["forward_cpu_ms"] for _ in range(repeats)]
+                results[n]["reference_forward_cpu_ms"] = float(np.median(ms))
     return results
 
 
@@ -237,7 +268,9 @@ def format_bench(results: Mapping[int, Mapping[str, float]]) -> str:
     for n, r in results.items():
         lines.append(
             f"{n:>6} (actual {r['vertices']} v): cpu {r['cpu_ms']:.1f} ms, wall {r['wall_ms']:.1f} ms "
-            f"[prior {r['prior_cpu_ms']:.1f}, graph {r['graph_cpu_ms']:.1f}, forward {r['forward_cpu_ms']:.1f}]; "
+            f"[prior {r['prior_cpu_ms']:.1f}, graph {r['graph_cpu_ms']:.1f}, forward {r['forward_cpu_ms']:.1f}"
+            + (f", torch forward {r['reference_forward_cpu_ms']:.1f}" if "reference_forward_cpu_ms" in r else "")
+            + "]; "
             f"same garment, new pose: cpu {r['pose_seq_cpu_ms']:.1f} ms; "
             f"first call (cold body) {r['first_call_wall_ms']:.0f} ms; "
             f"GarSim.drape on mesh pairs: cpu {r['api_cpu_ms']:.1f} ms; "
@@ -247,4 +280,4 @@ def format_bench(results: Mapping[int, Mapping[str, float]]) -> str:
     return "\n".join(lines)
 
 
-__all__ = ["bench_inference", "bench_newton", "bench_refine", "drape_once", "format_bench", "DEFAULT_POSE"]
+__all__ = ["bench_inference", "bench_newton", "bench_refine", "drape_once", "format_bench", "forward", "DEFAULT_POSE"]

@@ -9,14 +9,13 @@ frames (T, Vb, 3) with the same T, UVs (N, 2), normals (N, 3) or (T, N, 3). Prob
 from __future__ import annotations
 
 import os
-import tempfile
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from garsim.atomic import atomic_write
+from garsim.atomic import atomic_write, check_writable_folder
 
 
 class ExportError(ValueError):
@@ -43,30 +42,6 @@ def check_output(path: str | os.PathLike, supported: tuple[str, ...], what: str)
         raise ExportError(f"{p}: {what} cannot write {got}; use one of {', '.join(supported)}")
     check_writable_folder(p.parent, label=str(p))
     return p, ext
-
-
-def check_writable_folder(folder: str | os.PathLike, label: str | None = None) -> Path:
-    """Fail early when files cannot be created in ``folder`` (it or its nearest existing ancestor).
-
-    The check creates and removes a probe file (``os.access`` lies for root and read-only mounts);
-    missing folders are not created here, only later by the atomic write.
-    """
-    folder = Path(folder) if str(folder) else Path(".")
-    label = label or str(folder)
-    probe_dir = folder
-    while not probe_dir.exists():
-        if probe_dir.parent == probe_dir:
-            break
-        probe_dir = probe_dir.parent
-    if probe_dir.exists() and not probe_dir.is_dir():
-        raise ExportError(f"{label}: cannot create the output folder, {probe_dir} is a file")
-    try:
-        fd, tmp = tempfile.mkstemp(dir=probe_dir, prefix=".garsim-write-probe.")
-        os.close(fd)
-        os.unlink(tmp)
-    except OSError as exc:
-        raise ExportError(f"{label}: the output folder {probe_dir} is not writable ({exc.strerror or exc})") from None
-    return folder
 
 
 def check_frames(frames: Any, name: str = "frames") -> np.ndarray:

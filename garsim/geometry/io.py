@@ -1,4 +1,5 @@
-"""Triangle-mesh I/O through trimesh that preserves vertex order, with validation.
+"""Triangle-mesh I/O that preserves vertex order, with validation: OBJ read and written here (vectorised, no
+trimesh import: a cold ``garsim drape`` is faster by its ~0.5 s), the other formats through trimesh.
 
 Every mesh that enters garsim goes through :func:`validate_mesh`, which either returns clean
 ``float32 (V, 3)`` vertices and ``int64 (F, 3)`` faces or raises a one-line :class:`MeshError`
@@ -10,7 +11,8 @@ Repairs (documented, silent): polygons with more than three corners are triangul
 (trimesh does it on load for OBJ/PLY/OFF; :func:`validate_mesh` fan-triangulates an
 ``(F, k > 3)`` face array); unreferenced vertices are kept, so indices never shift.
 
-Vertex order: files are read with ``process=False`` (no merging, no reordering) and OBJ with
+Vertex order: OBJ vertices are kept in file order; other files are read with ``process=False`` (no merging, no
+reordering); an OBJ the vectorised reader cannot take (relative indices, odd tokens) goes to trimesh with
 ``maintain_order=True``. STL stores a triangle soup without shared vertices; it is merged on load
 (the order is then the order of first appearance) and cannot round-trip vertex order.
 
@@ -29,6 +31,8 @@ from __future__ import annotations
 
 import logging
 import os
+import re
+import sys
 import warnings
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -223,6 +227,38 @@ def _obj_candidate_lines(data: bytes) -> np.ndarray:
     pick = vf & ((tokens < 4) | comment)
     pick[-1] = True
     return starts[pick]
+
+
+_OBJ_V = re.compile(rb"^v[ \t]+(\S+)[ \t]+(\S+)[ \t]+(\S+)", re.M)
+_OBJ_F = re.compile(rb"^f[ \t]+([^\r\n#]*)", re.M)
+
+
+def _read_obj_fast(data: bytes) -> tuple[np.ndarray, np.ndarray] | None:
+    """(vertices, fan-triangulated faces) of a plain OBJ, vectorised (no trimesh import, ~10x faster to read), or
+    None when the file needs the general reader: negative (relative) indices, corners without a vertex index,
+    or tokens that are not numbers. Faces with k corners give k - 2 triangles, in file order."""
+    try:
+        vertices = np.array(_OBJ_V.findall(data), dtype=np.float64).reshape(-1, 3)
+        lines = [line.split() for line in _OBJ_F.findall(data)]
+        lines = [line for line in lines if len(line) >= 3]
+        if not lines:
+            return None
+        corners = b" ".join(b" ".join(line) for line in lines)
+        # keep each corner's vertex index: drop "/vt/vn" tails
+        flat = np.array(re.sub(rb"/[^ ]*", b"", corners).split(), dtype=np.int64)
+    except (ValueError, OverflowError):
+        return None
+    if flat.size == 0 or flat.min() < 1:
+        return None
+    flat -= 1
+    sizes = np.fromiter((len(line) for line in lines), dtype=np.int64, count=len(lines))
+    start = np.concatenate(([0], np.cumsum(sizes)[:-1]))
+    fans = sizes - 2
+    face_of = np.repeat(np.arange(len(lines)), fans)
+    j = np.arange(fans.sum()) - np.repeat(np.cumsum(fans) - fans, fans) + 1  # 1 .. k-2 within each face
+    base = start[face_of]
+    faces = np.stack([flat[base], flat[base + j], flat[base + j + 1]], axis=1)
+    return vertices, faces
 
 
 def _check_obj_lines(p: Path) -> None:
@@ -444,24 +480,34 @@ def _read_obj_attributes(p: Path, faces: np.ndarray) -> MeshAttributes:
 
 
 def _load(path: str | os.PathLike, y_up: bool, attributes: bool) -> tuple[np.ndarray, np.ndarray, MeshAttributes]:
-    import trimesh
-
     p, ext = _check_path(path, writing=False)
     kwargs: dict[str, Any] = {"process": False}
+    plain = None
     if ext == ".obj":
         _check_obj_lines(p)
         kwargs.update(maintain_order=True, skip_materials=True)
-    try:
-        with warnings.catch_warnings():  # trimesh's UV un-merging warns on faces without texture indices
-            warnings.simplefilter("ignore", RuntimeWarning)
-            loaded = trimesh.load(str(p), force="mesh", **kwargs)
-    except Exception as exc:  # noqa: BLE001 - trimesh raises many types on malformed files
-        detail = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
-        if isinstance(exc, IndexError):
-            detail += " (faces reference vertices that do not exist)"
-        raise MeshError(f"{p}: could not parse the {ext} file: {detail}") from None
-    vertices = np.asarray(getattr(loaded, "vertices", np.zeros((0, 3))))
-    faces = np.asarray(getattr(loaded, "faces", np.zeros((0, 3), dtype=np.int64)))
+        plain = _read_obj_fast(p.read_bytes())
+    if plain is not None:
+        loaded, (vertices, faces) = None, plain
+        if faces.size and faces.max() >= len(vertices):
+            raise MeshError(
+                f"{p}: could not parse the {ext} file: face index {int(faces.max()) + 1} but only {len(vertices)} "
+                "vertices (faces reference vertices that do not exist)"
+            )
+    else:
+        import trimesh
+
+        try:
+            with warnings.catch_warnings():  # trimesh's UV un-merging warns on faces without texture indices
+                warnings.simplefilter("ignore", RuntimeWarning)
+                loaded = trimesh.load(str(p), force="mesh", **kwargs)
+        except Exception as exc:  # noqa: BLE001 - trimesh raises many types on malformed files
+            detail = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+            if isinstance(exc, IndexError):
+                detail += " (faces reference vertices that do not exist)"
+            raise MeshError(f"{p}: could not parse the {ext} file: {detail}") from None
+        vertices = np.asarray(getattr(loaded, "vertices", np.zeros((0, 3))))
+        faces = np.asarray(getattr(loaded, "faces", np.zeros((0, 3), dtype=np.int64)))
     if len(faces) == 0:
         raise MeshError(
             f"{p}: no triangle faces found (the file has no vertices, or only points); garsim needs a triangle mesh"
@@ -579,8 +625,6 @@ def save_mesh(
     seams (with seams a warning says to write OBJ) and vertex colours, if given, take their place; OFF and STL
     have no UVs.
     """
-    import trimesh
-
     p, ext = _check_path(path, writing=True)
     v, f = validate_mesh(vertices, faces, name=str(p))
     attrs = attributes.check(len(f), name=str(p)) if attributes is not None and not attributes.empty else None
@@ -588,8 +632,10 @@ def save_mesh(
     if y_up:
         v = z_up_to_y_up(v)
         attrs = attrs.rotated(z_up_to_y_up) if attrs is not None else None
-    if ext == ".obj" and attrs is not None:
+    if ext == ".obj":
         return atomic_write_bytes(p, obj_text(v, f, attrs, colors))
+    import trimesh
+
     mesh = trimesh.Trimesh(vertices=v.astype(np.float64), faces=f, process=False, validate=False)
     uv = attrs.vertex_uvs(f, len(v)) if attrs is not None and ext in (".glb", ".ply") else None
     if attrs is not None and attrs.uvs is not None and uv is None and ext in (".glb", ".ply"):
@@ -603,10 +649,7 @@ def save_mesh(
         mesh.visual = trimesh.visual.ColorVisuals(mesh=mesh, vertex_colors=colors)
     elif uv is not None:
         mesh.visual = trimesh.visual.TextureVisuals(uv=uv)
-    export_kwargs: dict[str, Any] = {}
-    if ext == ".obj":
-        export_kwargs.update(include_normals=False, include_texture=False, digits=8)
-    data = mesh.export(file_type=ext[1:], **export_kwargs)
+    data = mesh.export(file_type=ext[1:])
     return atomic_write_bytes(p, data.encode("utf-8") if isinstance(data, str) else data)
 
 
@@ -637,13 +680,9 @@ def as_mesh(obj: Any, name: str | None = None) -> tuple[np.ndarray, np.ndarray]:
     if isinstance(obj, (str, os.PathLike)):
         return load_mesh(obj)
     label = name or type(obj).__name__
-    try:
-        import trimesh
-
-        if isinstance(obj, trimesh.Scene):
-            obj = obj.to_mesh() if hasattr(obj, "to_mesh") else obj.dump(concatenate=True)
-    except ImportError:  # pragma: no cover - trimesh is a dependency
-        pass
+    trimesh = sys.modules.get("trimesh")  # a Scene can only come from an imported trimesh: no import here
+    if trimesh is not None and isinstance(obj, trimesh.Scene):
+        obj = obj.to_mesh() if hasattr(obj, "to_mesh") else obj.dump(concatenate=True)
     if isinstance(obj, (tuple, list)):
         if len(obj) != 2:
             raise MeshError(f"{label}: expected a (vertices, faces) pair, got a sequence of length {len(obj)}")

@@ -20,7 +20,8 @@ from garsim.geometry.proximity import nearest_vertices, soft_anchor
 from garsim.model.config import FABRIC_FEATURES, GarSimConfig
 from garsim.model.encoders import MLP
 from garsim.model.garsim import CONFIG_FILE, MODEL_KEY, GarSimModel, GraphModel, WeightsError, node_batch
-from garsim.model.inputs import GarmentGraph, body_frame, build_graph
+from garsim.model.graph import GarmentGraph, build_graph
+from garsim.model.inputs import body_frame
 
 ABLATIONS: tuple[str, ...] = ("full", "displacement", "position", "no_message_passing")
 

@@ -1,4 +1,5 @@
-"""Sample -> garment graph: every input of the paper's Eq. 2, vectorised, as a torch_geometric Data.
+"""Sample -> the garment graph's arrays: every input of the paper's Eq. 2, vectorised, in numpy (no torch here:
+the numpy runtime drapes from these arrays; ``garsim.model.graph`` wraps them as a torch_geometric Data).
 
 Continuity (a deviation from the paper, which takes q_i = the nearest body vertex): every feature is
 a continuous function of the input geometry. q_i is the garment vertex's *soft anchor*, a blend of
@@ -22,20 +23,15 @@ Z and to translations. Full SO(3) equivariance is not wanted: gravity points dow
 
 from __future__ import annotations
 
-from collections.abc import Sequence
-
 import numpy as np
 import scipy.sparse as sp
-import torch
-from scipy.spatial import cKDTree
-from torch_geometric.data import Batch, Data
 
 from garsim.data.sample import Sample
 from garsim.garments.fabrics import PRESETS as FABRIC_PRESETS
 from garsim.garments.fabrics import Fabric, fabric_from_values, get_fabric
 from garsim.geometry.cache import ContentCache, content_key
 from garsim.geometry.io import as_mesh
-from garsim.geometry.mesh import directed_edges, face_normals, face_pairs, vertex_rings
+from garsim.geometry.mesh import directed_edges, face_pairs, vertex_rings
 from garsim.geometry.proximity import cached_tree, soft_anchor
 from garsim.model.config import FABRIC_FEATURES, GarSimConfig
 
@@ -175,26 +171,6 @@ def garment_topology(garment: np.ndarray, faces: np.ndarray, k: int) -> tuple[np
     return _GARMENTS.get(key, make)
 
 
-class GarmentGraph(Data):
-    """A garment graph; knows how to offset its index attributes when batched."""
-
-    def __inc__(self, key: str, value, *args, **kwargs):
-        if key in ("edge_index", "faces"):
-            return self.num_nodes
-        if key == "face_pairs":
-            return int(self.faces.shape[0])
-        if key == "anchor_index":
-            return torch.tensor([[self.num_nodes], [int(self.body_rel.shape[0])]])
-        if key == "col_batch":
-            return 1
-        return 0
-
-    def __cat_dim__(self, key: str, value, *args, **kwargs):
-        if key in ("edge_index", "anchor_index"):
-            return -1
-        return 0
-
-
 _FABRIC_SCALE = {
     key: (np.log(getattr(FABRIC_PRESETS["silk"], key)), np.log(getattr(FABRIC_PRESETS["leather"], key)))
     for key in ("bending", "density", "stretch")
@@ -219,21 +195,18 @@ def fabric_features(sample: Sample) -> np.ndarray:
     )
 
 
-def build_graph(
+def graph_arrays(
     sample: Sample,
     config: GarSimConfig | None = None,
     *,
-    with_collision: bool = False,
     loss_inputs: bool = True,
     name: str | None = None,
-) -> GarmentGraph:
-    """One Sample -> a GarmentGraph with every Eq. 2 input (and the target, if the sample has one).
+) -> dict[str, np.ndarray]:
+    """One Sample -> every Eq. 2 input of its garment graph as numpy arrays (and the target, if the sample has one).
 
-    ``with_collision`` adds the target-body vertices near the garment and their normals
-    (``col_body``, ``col_normal``, ``col_batch``) for the collision loss; ``loss_inputs=False``
-    (inference) skips the face pairs only the losses need. The body geometry neighbourhoods
-    ``body_rel`` are stored once per distinct q (``q_slot`` maps each vertex to its row), and
-    edges are sorted by receiver.
+    ``loss_inputs=False`` (inference) skips the face pairs only the losses need. The body geometry
+    neighbourhoods ``body_rel`` are stored once per distinct q (``anchor_index`` maps each vertex to its
+    rows, with ``anchor_weight``), and edges are sorted by receiver. Fresh arrays: the caller may keep them.
     """
     cfg = config or GarSimConfig()
     body_c = np.asarray(sample.body_canonical, dtype=np.float32)
@@ -273,65 +246,30 @@ def build_graph(
     np.maximum.at(mass, slot, w.data)
     sem = semantic_vector(body.framed, used, cfg, bounds=body.bounds, weights=mass)
 
-    data = GarmentGraph(
-        num_nodes=n,
-        pos=torch.from_numpy(g.copy()),
-        prior=torch.from_numpy(prior.copy()),
-        anchor=torch.from_numpy(bq_t.astype(np.float32)),
-        p=torch.from_numpy(p.astype(np.float32)),
-        p_prior=torch.from_numpy(p_prior.astype(np.float32)),
-        delta=torch.from_numpy(delta.astype(np.float32)),
-        fabric=torch.from_numpy(fab),
-        pinned=torch.from_numpy(np.asarray(sample.pinned, dtype=bool).copy()),
-        gar_rel=torch.from_numpy(gar_rel),
-        body_rel=torch.from_numpy(body_rel),
-        anchor_index=torch.from_numpy(np.stack([w.row.astype(np.int64), slot.astype(np.int64)])),
-        anchor_weight=torch.from_numpy(w.data.astype(np.float32)),
-        edge_index=torch.from_numpy(ei.copy()),  # the cached array stays private
-        edge_attr=torch.from_numpy(edge_attr),
-        faces=torch.from_numpy(faces.copy()),
-        sem=torch.from_numpy(sem)[None],
-        rot=torch.from_numpy(body.rot.copy())[None],
-        name=name if name is not None else str(sample.meta.get("name", "")),
-    )
+    arrays = {
+        "pos": g.copy(),
+        "prior": prior.copy(),
+        "anchor": bq_t.astype(np.float32),
+        "p": p.astype(np.float32),
+        "p_prior": p_prior.astype(np.float32),
+        "delta": delta.astype(np.float32),
+        "fabric": fab,
+        "pinned": np.asarray(sample.pinned, dtype=bool).copy(),
+        "gar_rel": gar_rel,
+        "body_rel": body_rel,
+        "anchor_index": np.stack([w.row.astype(np.int64), slot.astype(np.int64)]),
+        "anchor_weight": w.data.astype(np.float32),
+        "edge_index": ei.copy(),  # the cached array stays private
+        "edge_attr": edge_attr,
+        "faces": faces.copy(),
+        "sem": sem[None],
+        "rot": body.rot.copy()[None],
+    }
     if loss_inputs:
-        data.face_pairs = torch.from_numpy(face_pairs(faces))
+        arrays["face_pairs"] = face_pairs(faces)
     if sample.target is not None:
         if not np.isfinite(sample.target).all():
-            raise ValueError(f"sample {data.name!r} has a non-finite target (ground truth): fix or drop it")
-        data.target = torch.from_numpy(np.asarray(sample.target, dtype=np.float32).copy())
-    if with_collision:
-        data.update(collision_body(sample))
-    return data
-
-
-def _vertex_normals_at(vertices: np.ndarray, faces: np.ndarray, sel: np.ndarray) -> np.ndarray:
-    """``vertex_normals(vertices, faces)[sel]`` from only the faces touching ``sel`` (same values)."""
-    touched = np.zeros(len(vertices), dtype=bool)
-    touched[sel] = True
-    sub = faces[touched[faces].any(axis=1)]  # every face incident to a selected vertex, in order
-    fn = face_normals(vertices, sub, normalize=False)
-    idx = sub.T.ravel()  # the summation order of vertex_normals (corner 0 of all faces, then 1, 2)
-    vn = np.stack([np.bincount(idx, weights=np.tile(fn[:, c], 3), minlength=len(vertices)) for c in range(3)], axis=1)[
-        sel
-    ]
-    return (vn / np.maximum(np.linalg.norm(vn, axis=1, keepdims=True), 1e-20)).astype(vertices.dtype)
-
-
-def collision_body(sample: Sample, k: int = 16) -> dict[str, torch.Tensor]:
-    """Target-body vertices near the garment (k nearest of each prior/target vertex) and their unit normals."""
-    body_t = np.asarray(sample.body_target, dtype=np.float32)
-    pts = sample.prior if sample.target is None else np.concatenate([sample.prior, sample.target])
-    _, idx = cKDTree(body_t).query(pts, k=min(k, len(body_t)), workers=-1)
-    sel = np.unique(np.asarray(idx).ravel())
-    normals = _vertex_normals_at(body_t, np.asarray(sample.body_faces, dtype=np.int64), sel)
-    return {
-        "col_body": torch.from_numpy(body_t[sel].copy()),
-        "col_normal": torch.from_numpy(np.ascontiguousarray(normals, dtype=np.float32)),
-        "col_batch": torch.zeros(len(sel), dtype=torch.long),
-    }
-
-
-def collate(graphs: Sequence[GarmentGraph]) -> Batch:
-    """Batch garment graphs of any sizes/topologies (indices offset per graph)."""
-    return Batch.from_data_list(list(graphs))
+            label = name if name is not None else str(sample.meta.get("name", ""))
+            raise ValueError(f"sample {label!r} has a non-finite target (ground truth): fix or drop it")
+        arrays["target"] = np.asarray(sample.target, dtype=np.float32).copy()
+    return arrays

@@ -32,7 +32,7 @@ from garsim.data.sample import Sample
 from garsim.model.baselines import MODELS
 from garsim.model.config import GarSimConfig, check_known_keys
 from garsim.model.garsim import GraphModel
-from garsim.model.inputs import GarmentGraph, build_graph, collate
+from garsim.model.graph import GarmentGraph, build_graph, collate
 from garsim.train.losses import LossWeights, collision_fraction, garsim_loss, per_graph_error_mm
 
 CSV_FIELDS = (

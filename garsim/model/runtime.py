@@ -1,0 +1,225 @@
+"""The GarSim forward pass in numpy: the inference path's runtime, without torch.
+
+``garsim.model.garsim.GarSimModel`` (torch) is the model that trains; this module runs the same saved weights
+on the arrays of ``garsim.model.inputs.graph_arrays`` with numpy and scipy only, so a cold ``garsim drape``
+does not import torch (~1.3 s) or torch_geometric (~2 s more). It is a second implementation of one network, so
+``tests/test_model_runtime.py`` holds it to the torch model's output (to float32 rounding) for every head,
+activation, normalisation and fabric option; configurations it does not cover (aggregations other than the
+paper's mean) are refused with a message, and ``GarSim.load`` then uses torch.
+
+Speed: the fabric is one vector per garment, so its FiLM scale/shift and magnitude gain are computed once, not
+per node; the mean aggregation is one CSR product over the receiver-sorted edges; every node-side projection
+of the edge MLP's first layer is done per node and gathered (as the torch processor does).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping, Sequence
+from pathlib import Path
+
+import numpy as np
+import scipy.sparse as sp
+
+from garsim.data.sample import Sample
+from garsim.model.config import GarSimConfig
+from garsim.model.inputs import graph_arrays
+from garsim.model.weights import CONFIG_FILE, DEFAULT_KIND, WEIGHTS_FILE, WeightsError, load_verified, read_model_config
+
+
+def _gelu(x: np.ndarray) -> np.ndarray:
+    from scipy.special import erf  # only GELU models need it
+
+    return (0.5 * x * (1.0 + erf(x / np.float32(np.sqrt(2.0))))).astype(np.float32)
+
+
+_ACTIVATIONS: dict[str, Callable[[np.ndarray], np.ndarray]] = {
+    "relu": lambda x: np.maximum(x, np.float32(0.0), out=x),
+    "silu": lambda x: x / (np.float32(1.0) + np.exp(-x)),
+    "gelu": _gelu,
+}
+
+
+def _linear(x: np.ndarray, w: np.ndarray, b: np.ndarray | None) -> np.ndarray:
+    if x.ndim != 2:  # one GEMM, not one per leading index (numpy's stacked matmul is ~10x slower here)
+        return _linear(x.reshape(-1, x.shape[-1]), w, b).reshape(*x.shape[:-1], w.shape[0])
+    y = x @ w.T
+    if b is not None:
+        y += b
+    return y
+
+
+def _layer_norm(x: np.ndarray, w: np.ndarray, b: np.ndarray, eps: float = 1e-5) -> np.ndarray:
+    mean = x.mean(axis=-1, keepdims=True)
+    var = np.square(x - mean).mean(axis=-1, keepdims=True)
+    return (x - mean) / np.sqrt(var + np.float32(eps)) * w + b
+
+
+class _MLP:
+    """An ``encoders.MLP`` (or any nn.Sequential of Linear/activation/LayerNorm) from its state-dict entries."""
+
+    def __init__(self, state: Mapping[str, np.ndarray], prefix: str, act: Callable[[np.ndarray], np.ndarray]):
+        idx = sorted({int(k[len(prefix) :].split(".")[0]) for k in state if k.startswith(prefix)})
+        self.layers: list[tuple[str, np.ndarray, np.ndarray | None]] = []
+        for i in idx:
+            w, b = state[f"{prefix}{i}.weight"], state.get(f"{prefix}{i}.bias")
+            self.layers.append(("linear" if w.ndim == 2 else "norm", w, b))
+        self.act = act
+
+    def __call__(self, x: np.ndarray) -> np.ndarray:
+        n_linear = sum(kind == "linear" for kind, _, _ in self.layers)
+        seen = 0
+        for kind, w, b in self.layers:
+            if kind == "norm":
+                x = _layer_norm(x, w, b)  # type: ignore[arg-type]
+                continue
+            x = _linear(x, w, b)
+            seen += 1
+            if seen < n_linear:  # an activation between linear layers, none after the last
+                x = self.act(x)
+        return x
+
+
+class GarSimRuntime:
+    """A saved GarSim model run with numpy: ``predict(sample)`` as ``GarSimModel.predict``, without torch."""
+
+    kind = DEFAULT_KIND
+    make_graph = staticmethod(graph_arrays)
+    """Sample -> this model's input (``GraphModel.make_graph``'s counterpart)."""
+
+    def __init__(self, config: GarSimConfig, state: Mapping[str, np.ndarray]):
+        if config.aggregation != "mean":
+            raise ValueError(
+                f"the numpy runtime implements the paper's mean aggregation, not {config.aggregation!r}; "
+                "load this model with garsim.model.garsim.GarSimModel (torch)"
+            )
+        self.config = config
+        s = {k: np.ascontiguousarray(v, dtype=np.float32) for k, v in state.items()}
+        self._act = _ACTIVATIONS[config.activation]
+        act = self._act
+        self.scale = np.float32(config.pos_scale)
+        g1w, g1b, g2w, g2b = (
+            s[f"geometry.mlp.{i}.{p}"] for i, p in ((0, "weight"), (0, "bias"), (2, "weight"), (2, "bias"))
+        )
+        self.geo = (g1w * self.scale, g1b, g2w, g2b)
+        self.semantic = _MLP(s, "semantic.mlp.", act)
+        self.garment = _MLP(s, "garment_encoder.mlp.", act)
+        self.body = _MLP(s, "body_encoder.mlp.", act)
+        self.node = _MLP(s, "node_encoder.mlp.", act)
+        self.edge = _MLP(s, "edge_encoder.mlp.", act)
+        n_blocks = 1 if (config.share_weights and config.num_steps > 0) else config.num_steps
+        self.steps = [
+            (
+                s[f"processor.steps.{i}.edge_update.lin_recv.weight"],
+                s[f"processor.steps.{i}.edge_update.lin_recv.bias"],
+                s[f"processor.steps.{i}.edge_update.lin_send.weight"],
+                s[f"processor.steps.{i}.edge_update.lin_edge.weight"],
+                _MLP(s, f"processor.steps.{i}.edge_update.rest.", act),
+                _MLP(s, f"processor.steps.{i}.node_update.", act),
+                (s[f"processor.film.{i}.weight"], s[f"processor.film.{i}.bias"]) if config.fabric_film else None,
+            )
+            for i in range(n_blocks)
+        ]
+        self.decoder = _MLP(s, "decoder.mlp.", act)
+        gain = ("decoder.fabric_gain.weight", "decoder.fabric_gain.bias")
+        self.fabric_gain = (s[gain[0]], s[gain[1]]) if gain[0] in s else None
+
+    @classmethod
+    def load(cls, directory: str | Path) -> GarSimRuntime:
+        """A model directory saved by ``GarSimModel.save``, with the same checks as ``GarSimModel.load``."""
+        from safetensors.numpy import load_file
+
+        config, state = load_verified(directory, cls.kind, load_file)
+        try:
+            return cls(config, state)
+        except KeyError as exc:
+            raise WeightsError(
+                f"{Path(directory) / WEIGHTS_FILE}: weights do not match config.json: missing {exc.args[0]!r}"
+            ) from None
+
+    def _geometry(self, rel: np.ndarray) -> np.ndarray:
+        """PointNet++ set abstraction: (M, k, 3) relative positions -> (M, geo_out), max-pooled."""
+        w1, b1, w2, b2 = self.geo
+        h = _linear(self._act(_linear(rel, w1, b1)), w2, b2)
+        if self.config.activation == "relu":  # monotonic: pool first (as the torch encoder)
+            return self._act(h.max(axis=1))
+        return self._act(h).max(axis=1)
+
+    def forward(self, a: Mapping[str, np.ndarray]) -> np.ndarray:
+        """Predicted garment vertices (N, 3), world coordinates, from one graph's ``graph_arrays``."""
+        n = len(a["pos"])
+        sc = self.scale
+        x_gar = self._geometry(a["gar_rel"])
+        rows, slots = a["anchor_index"]
+        enc = self._geometry(a["body_rel"])
+        blend = sp.csr_matrix((a["anchor_weight"], (rows, slots)), shape=(n, len(enc)))
+        x_body = np.asarray(blend @ enc, dtype=np.float32)
+        s = np.broadcast_to(self.semantic(a["sem"]), (n, self.config.semantic_dim))
+        fabric = a["fabric"]
+        chi = self.garment(np.concatenate([x_gar, fabric, a["p"] * sc, a["p_prior"] * sc], axis=1))
+        mu = self.body(np.concatenate([x_body, a["delta"] * sc, s], axis=1))
+        node = self.node(np.concatenate([chi, mu], axis=1))
+        edge = self.edge(a["edge_attr"] * sc)
+        node = self._process(node, edge, a["edge_index"], fabric)
+        vec = self._decode(node, fabric)
+        world = vec @ a["rot"][0]  # R^T v for every row: body frame -> world
+        base = a["anchor"] if self.config.head == "position" else a["prior"]
+        return (base + world).astype(np.float32)
+
+    __call__ = forward
+
+    def _process(self, node: np.ndarray, edge: np.ndarray, edge_index: np.ndarray, fabric: np.ndarray) -> np.ndarray:
+        snd, rcv = edge_index
+        n = len(node)
+        counts = np.bincount(rcv, minlength=n)
+        order = np.argsort(rcv, kind="stable")
+        inv = (1.0 / np.maximum(counts, 1)).astype(np.float32)
+        indptr = np.concatenate([[0], np.cumsum(counts)])
+        mean = sp.csr_matrix((inv[rcv[order]], order, indptr), shape=(n, len(rcv)))
+        uniform = bool((fabric == fabric[:1]).all())  # one fabric per garment: FiLM once, broadcast
+        for l in range(self.config.num_steps):
+            w_recv, b_recv, w_send, w_edge, rest, node_mlp, film = self.steps[l % len(self.steps)]
+            hid = np.take(_linear(node, w_recv, b_recv), rcv, axis=0)
+            hid += np.take(node @ w_send.T, snd, axis=0)
+            hid += edge @ w_edge.T
+            new_edge = rest(self._act(hid))
+            if film is not None:
+                f = _linear(fabric[:1] if uniform else fabric, *film)
+                scale, shift = np.split(f if uniform else np.take(f, snd, axis=0), 2, axis=1)
+                new_edge = new_edge * (np.float32(1.0) + scale) + shift
+            agg = np.asarray(mean @ new_edge, dtype=np.float32)
+            new_node = node_mlp(np.concatenate([agg, node], axis=1))
+            if self.config.residual:
+                node, edge = node + new_node, edge + new_edge
+            else:
+                node, edge = new_node, new_edge
+        return node
+
+    def _decode(self, node: np.ndarray, fabric: np.ndarray) -> np.ndarray:
+        out = self.decoder(node)
+        if self.config.head != "direction_magnitude":
+            return out / self.scale
+        direction = out[:, :3] / np.maximum(np.linalg.norm(out[:, :3], axis=1, keepdims=True), np.float32(1e-8))
+        magnitude = np.logaddexp(np.float32(0.0), out[:, 3:4]) / self.scale
+        if self.fabric_gain is not None:
+            magnitude = magnitude * np.exp(_linear(fabric, *self.fabric_gain))
+        return direction * magnitude
+
+    def predict(self, sample: Sample | Sequence[Sample]) -> np.ndarray | list[np.ndarray]:
+        """Sample(s) -> predicted garment vertices (float32), as ``GarSimModel.predict``."""
+        if isinstance(sample, Sample):
+            return self.forward(graph_arrays(sample, self.config, loss_inputs=False))
+        return [self.predict(s) for s in sample]  # type: ignore[misc]
+
+
+def load_for_inference(directory: str | Path) -> GarSimRuntime | object:
+    """The model saved in ``directory`` for draping: the numpy runtime when it implements the model (GarSim with
+    the mean aggregation), else the torch model (``garsim.model.baselines.load_model``: the DeePSD-style
+    baseline, other aggregations). Both have ``predict(sample)`` and ``config``."""
+    config_path = Path(directory) / CONFIG_FILE
+    if config_path.exists():
+        config, kind = read_model_config(config_path)
+        if kind == GarSimRuntime.kind and config.aggregation == "mean":
+            return GarSimRuntime.load(directory)
+    from garsim.model.baselines import load_model  # torch
+
+    return load_model(directory)
