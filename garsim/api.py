@@ -148,6 +148,82 @@ def check_scene(body: np.ndarray, garment: np.ndarray, up: str = "z", units: str
         )
 
 
+@dataclasses.dataclass(frozen=True)
+class Scene:
+    """The per-sequence part of a drape: the validated canonical body and garment (garsim's frame), the garment's
+    pin mask and fabric. ``sample(target)`` adds one target body."""
+
+    body_canonical: np.ndarray
+    body_faces: np.ndarray
+    garment: np.ndarray
+    garment_faces: np.ndarray
+    pinned: np.ndarray
+    fabric: str
+    fabric_values: dict[str, float] | None
+    garment_type: str = "unknown"
+    up: str = "z"
+    units: str = "m"
+
+    @classmethod
+    def make(
+        cls,
+        body_canonical: Any,
+        garment: Any,
+        fabric: Any = "cotton",
+        pinned: Any = None,
+        garment_type: str = "unknown",
+        up: str = "z",
+        units: str = "m",
+    ) -> Scene:
+        """Validate the canonical body and the garment (in ``up`` axis and ``units``), their relation, the pins and
+        the fabric."""
+        fabric_name, fabric_values = fabric_fields(fabric)
+        bc, bf = as_mesh(body_canonical, "canonical body")
+        g, gf = as_mesh(garment, "garment")
+        bc, g = (to_internal(v, up, units).astype(np.float32) for v in (bc, g))
+        check_scene(bc, g, up=up, units=units)
+        if isinstance(pinned, str):
+            if pinned.strip().lower() != "auto":
+                raise ValueError(f"pinned must be 'auto', vertex indices or a boolean mask, got {pinned!r}")
+            pinned = auto_pinned(g, gf)
+        mask = _pinned_mask(pinned, len(g))
+        return cls(bc, bf, g, gf, mask, fabric_name, fabric_values, garment_type, up, units)
+
+    def target_vertices(self, body_target: Any) -> np.ndarray:
+        """A target body (a mesh, or an array of vertices on the canonical body's faces) in garsim's frame; it must
+        share the canonical body's topology."""
+        if isinstance(body_target, np.ndarray) and body_target.shape == self.body_canonical.shape:
+            if not np.isfinite(body_target).all():
+                raise MeshError("target body: vertices contain NaN or inf; fix the mesh")
+            bt, bf_t = body_target, self.body_faces
+        else:
+            bt, bf_t = as_mesh(body_target, "target body")
+        bt = to_internal(bt, self.up, self.units).astype(np.float32)
+        bc, bf = self.body_canonical, self.body_faces
+        if bc.shape != bt.shape or bf.shape != bf_t.shape or not (bf_t is bf or np.array_equal(bf, bf_t)):
+            raise MeshError(
+                f"canonical body ({len(bc)} vertices, {len(bf)} faces) and target body ({len(bt)} vertices, "
+                f"{len(bf_t)} faces) must share one topology: pose the same body mesh"
+            )
+        return bt
+
+    def sample(self, body_target: Any) -> Sample:
+        """The model's input record for one target body (validated here), with the prior."""
+        bt = self.target_vertices(body_target)
+        return Sample(
+            body_canonical=self.body_canonical,
+            body_target=bt,
+            body_faces=self.body_faces,
+            garment=self.garment,
+            garment_faces=self.garment_faces,
+            pinned=self.pinned,
+            prior=mesh_pair_prior(self.garment, self.body_canonical, bt, self.body_faces),
+            fabric=self.fabric,
+            fabric_values=self.fabric_values,
+            garment_type=self.garment_type,
+        )
+
+
 def make_sample(
     body_canonical: Any,
     body_target: Any,
@@ -162,34 +238,7 @@ def make_sample(
 
     ``pinned``: garment vertex indices, an (N,) boolean mask, ``"auto"`` (the top border loops, found in the
     canonical body's frame: :func:`auto_pinned`) or None; pinned vertices follow the prior exactly."""
-    fabric_name, fabric_values = fabric_fields(fabric)
-    bc, bf = as_mesh(body_canonical, "canonical body")
-    bt, bf_t = as_mesh(body_target, "target body")
-    g, gf = as_mesh(garment, "garment")
-    bc, bt, g = (to_internal(v, up, units).astype(np.float32) for v in (bc, bt, g))
-    check_scene(bc, g, up=up, units=units)
-    if isinstance(pinned, str):
-        if pinned.strip().lower() != "auto":
-            raise ValueError(f"pinned must be 'auto', vertex indices or a boolean mask, got {pinned!r}")
-        pinned = auto_pinned(g, gf)
-    if bc.shape != bt.shape or bf.shape != bf_t.shape or not np.array_equal(bf, bf_t):
-        raise MeshError(
-            f"canonical body ({len(bc)} vertices, {len(bf)} faces) and target body ({len(bt)} vertices, "
-            f"{len(bf_t)} faces) must share one topology: pose the same body mesh"
-        )
-    prior = mesh_pair_prior(g, bc, bt, bf)
-    return Sample(
-        body_canonical=bc,
-        body_target=bt,
-        body_faces=bf,
-        garment=g,
-        garment_faces=gf,
-        pinned=_pinned_mask(pinned, len(g)),
-        prior=prior,
-        fabric=fabric_name,
-        fabric_values=fabric_values,
-        garment_type=garment_type,
-    )
+    return Scene.make(body_canonical, garment, fabric, pinned, garment_type, up, units).sample(body_target)
 
 
 _COARSE = ContentCache(8, scope="garment")  # per garment: its decimated copy and the maps both ways
@@ -391,18 +440,19 @@ class GarSim:
         """The garment on every target body of a sequence: (T, N, 3).
 
         ``body_targets`` is a sequence of meshes (or vertex arrays sharing the canonical body's faces) or a
-        (T, Vb, 3) array. Per-garment and per-body work (validation, soft anchors, graph topology, the rig
-        fit for the canonical body) is computed once and reused across frames (content-keyed caches).
+        (T, Vb, 3) array. Per-garment and per-body work is done once per sequence: validating the canonical body and
+        the garment and their relation (``Scene``), and through content-keyed caches the soft anchors, the graph
+        topology, the rig fit of the canonical body and the network's pose-free features; each frame pays for its
+        target body's prior, the network and the refinement.
         """
-        bc, bf = as_mesh(body_canonical, "canonical body")
-        g, gf = as_mesh(garment, "garment")
         targets = list(body_targets)
         if not targets:
             raise ValueError("body_targets is empty: give at least one target body")
-        frames = []
+        scene = Scene.make(body_canonical, garment, fabric, pinned, up=up, units=units)  # once per sequence
         from tqdm import tqdm
 
-        for t in tqdm(targets, disable=not progress, unit="frame"):
-            mesh = (t, bf) if isinstance(t, np.ndarray) and t.ndim == 2 else t
-            frames.append(self.drape((bc, bf), mesh, (g, gf), fabric=fabric, pinned=pinned, up=up, units=units))
+        frames = [
+            from_internal(self.predict(scene.sample(t)), up, units).astype(np.float32)
+            for t in tqdm(targets, disable=not progress, unit="frame")
+        ]
         return np.stack(frames)

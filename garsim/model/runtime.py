@@ -7,13 +7,17 @@ does not import torch (~1.3 s) or torch_geometric (~2 s more). It is a second im
 activation, normalisation and fabric option; configurations it does not cover (aggregations other than the
 paper's mean) are refused with a message, and ``GarSim.load`` then uses torch.
 
-Speed: the fabric is one vector per garment, so its FiLM scale/shift and magnitude gain are computed once, not
-per node; the mean aggregation is one CSR product over the receiver-sorted edges; every node-side projection
-of the edge MLP's first layer is done per node and gathered (as the torch processor does).
+Speed: what depends on the template garment and the canonical body alone (the geometry encoders' features of
+the garment and at the soft anchors, the body-semantic vector) is cached by content, so a pose sequence computes
+it once; the fabric is one vector per garment, so its FiLM scale/shift is folded into each edge update's last
+linear layer, and its magnitude gain is computed once, not per node; the mean aggregation is one CSR product over
+the receiver-sorted edges; every node-side projection of the edge MLP's first layer is done per node and gathered
+(as the torch processor does).
 """
 
 from __future__ import annotations
 
+import itertools
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 
@@ -21,9 +25,13 @@ import numpy as np
 import scipy.sparse as sp
 
 from garsim.data.sample import Sample
+from garsim.geometry.cache import ContentCache, content_key
 from garsim.model.config import GarSimConfig
 from garsim.model.inputs import graph_arrays
 from garsim.model.weights import CONFIG_FILE, DEFAULT_KIND, WEIGHTS_FILE, WeightsError, load_verified, read_model_config
+
+_STATIC = ContentCache(8, scope="garment")  # per (model, template garment, canonical body): pose-free features
+_TOKENS = itertools.count()
 
 
 def _gelu(x: np.ndarray) -> np.ndarray:
@@ -49,9 +57,12 @@ def _linear(x: np.ndarray, w: np.ndarray, b: np.ndarray | None) -> np.ndarray:
 
 
 def _layer_norm(x: np.ndarray, w: np.ndarray, b: np.ndarray, eps: float = 1e-5) -> np.ndarray:
-    mean = x.mean(axis=-1, keepdims=True)
-    var = np.square(x - mean).mean(axis=-1, keepdims=True)
-    return (x - mean) / np.sqrt(var + np.float32(eps)) * w + b
+    xc = x - x.mean(axis=-1, keepdims=True)
+    inv = np.float32(1.0) / np.sqrt(np.einsum("ij,ij->i", xc, xc)[:, None] / np.float32(x.shape[-1]) + np.float32(eps))
+    xc *= inv
+    xc *= w
+    xc += b
+    return xc
 
 
 class _MLP:
@@ -65,17 +76,27 @@ class _MLP:
             self.layers.append(("linear" if w.ndim == 2 else "norm", w, b))
         self.act = act
 
-    def __call__(self, x: np.ndarray) -> np.ndarray:
+    def __call__(
+        self, x: np.ndarray, out_scale: np.ndarray | None = None, out_shift: np.ndarray | None = None
+    ) -> np.ndarray:
+        """The MLP on ``x``, its output then scaled by ``out_scale`` and shifted by ``out_shift`` (per channel;
+        folded into the last layer's weights when that layer is linear)."""
         n_linear = sum(kind == "linear" for kind, _, _ in self.layers)
+        last = len(self.layers) - 1
+        fold = out_scale is not None and self.layers[last][0] == "linear"
         seen = 0
-        for kind, w, b in self.layers:
+        for i, (kind, w, b) in enumerate(self.layers):
             if kind == "norm":
                 x = _layer_norm(x, w, b)  # type: ignore[arg-type]
                 continue
+            if fold and i == last:
+                w, b = w * out_scale[:, None], (b if b is not None else 0.0) * out_scale + out_shift
             x = _linear(x, w, b)
             seen += 1
             if seen < n_linear:  # an activation between linear layers, none after the last
                 x = self.act(x)
+        if out_scale is not None and not fold:
+            x = x * out_scale + out_shift
         return x
 
 
@@ -93,6 +114,7 @@ class GarSimRuntime:
                 "load this model with garsim.model.garsim.GarSimModel (torch)"
             )
         self.config = config
+        self._token = next(_TOKENS)  # this instance's part of the feature cache's keys
         s = {k: np.ascontiguousarray(v, dtype=np.float32) for k, v in state.items()}
         self._act = _ACTIVATIONS[config.activation]
         act = self._act
@@ -146,14 +168,8 @@ class GarSimRuntime:
 
     def forward(self, a: Mapping[str, np.ndarray]) -> np.ndarray:
         """Predicted garment vertices (N, 3), world coordinates, from one graph's ``graph_arrays``."""
-        n = len(a["pos"])
         sc = self.scale
-        x_gar = self._geometry(a["gar_rel"])
-        rows, slots = a["anchor_index"]
-        enc = self._geometry(a["body_rel"])
-        blend = sp.csr_matrix((a["anchor_weight"], (rows, slots)), shape=(n, len(enc)))
-        x_body = np.asarray(blend @ enc, dtype=np.float32)
-        s = np.broadcast_to(self.semantic(a["sem"]), (n, self.config.semantic_dim))
+        x_gar, x_body, s = self._static(a)
         fabric = a["fabric"]
         chi = self.garment(np.concatenate([x_gar, fabric, a["p"] * sc, a["p_prior"] * sc], axis=1))
         mu = self.body(np.concatenate([x_body, a["delta"] * sc, s], axis=1))
@@ -166,6 +182,21 @@ class GarSimRuntime:
         return (base + world).astype(np.float32)
 
     __call__ = forward
+
+    def _static(self, a: Mapping[str, np.ndarray]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(garment geometry features, body geometry features at the soft anchors, body-semantic rows): functions
+        of the template garment and the canonical body only, cached by the content of their inputs."""
+        names = ("gar_rel", "body_rel", "anchor_index", "anchor_weight", "sem")
+
+        def compute() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+            n = len(a["gar_rel"])
+            rows, slots = a["anchor_index"]
+            enc = self._geometry(a["body_rel"])
+            blend = sp.csr_matrix((a["anchor_weight"], (rows, slots)), shape=(n, len(enc)))
+            s = np.broadcast_to(self.semantic(a["sem"]), (n, self.config.semantic_dim))
+            return self._geometry(a["gar_rel"]), np.asarray(blend @ enc, dtype=np.float32), s
+
+        return _STATIC.get((self._token, content_key(*(a[k] for k in names))), compute)
 
     def _process(self, node: np.ndarray, edge: np.ndarray, edge_index: np.ndarray, fabric: np.ndarray) -> np.ndarray:
         snd, rcv = edge_index
@@ -181,11 +212,15 @@ class GarSimRuntime:
             hid = np.take(_linear(node, w_recv, b_recv), rcv, axis=0)
             hid += np.take(node @ w_send.T, snd, axis=0)
             hid += edge @ w_edge.T
-            new_edge = rest(self._act(hid))
-            if film is not None:
-                f = _linear(fabric[:1] if uniform else fabric, *film)
-                scale, shift = np.split(f if uniform else np.take(f, snd, axis=0), 2, axis=1)
-                new_edge = new_edge * (np.float32(1.0) + scale) + shift
+            hid = self._act(hid)
+            if film is not None and uniform:  # one scale/shift for every edge: folded into the last layer
+                scale, shift = np.split(_linear(fabric[:1], *film)[0], 2)
+                new_edge = rest(hid, out_scale=np.float32(1.0) + scale, out_shift=shift)
+            else:
+                new_edge = rest(hid)
+                if film is not None:
+                    scale, shift = np.split(np.take(_linear(fabric, *film), snd, axis=0), 2, axis=1)
+                    new_edge = new_edge * (np.float32(1.0) + scale) + shift
             agg = np.asarray(mean @ new_edge, dtype=np.float32)
             new_node = node_mlp(np.concatenate([agg, node], axis=1))
             if self.config.residual:
