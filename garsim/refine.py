@@ -26,7 +26,8 @@ near the surface; rounds repeat until nothing is violated, at most ``MAX_ROUNDS`
 prediction tangled with the body is improved, not solved), and a final exact contact projection
 guarantees the margin (contact wins over stretch where they conflict).
 
-Closest point on the obstacle: a warp BVH over the obstacle's triangles (float32) finds each point's
+Closest point on the obstacle (``garsim.geometry.inside.Obstacle``, the one exact query garsim has): a
+warp BVH over the obstacle's triangles (float32) finds each point's
 closest triangle; the closest point on it is recomputed in float64 (Ericson 5.1.5) together with the
 feature it lies on (vertex, edge or interior), whose angle-weighted pseudo-normal gives the inside /
 outside sign (Baerentzen & Aanaes 2005; exact for a closed, outward-oriented mesh). Every garment
@@ -58,7 +59,7 @@ import numpy as np
 
 from garsim.garments.fabrics import Fabric, get_fabric
 from garsim.geometry.cache import ContentCache, content_key
-from garsim.geometry.inside import quiet_warp
+from garsim.geometry.inside import UNBOUNDED, Obstacle, obstacle, quiet_warp, surface_funcs
 from garsim.geometry.mesh import unique_edges
 
 DEFAULT_STRETCH = 1.10
@@ -79,9 +80,6 @@ RELAXATION = 1.0
 CHEBYSHEV_RHO = 0.95
 """Spectral radius estimate of the Chebyshev acceleration (0 = plain Jacobi; 0.99 converges a stretched
 sleeve faster but overshoots into compression and oscillates against contacts)."""
-UNBOUNDED = 1.0e6
-"""m: the search radius of a query that must find the closest point wherever it is."""
-_SLACK = 1e-5  # m: added to every float32 search radius, far above its rounding (~1e-6 at 10 m from the origin)
 _STRETCH_TOL = 1e-3  # relative: an edge within limit * (1 + this) counts as satisfied
 _DIST_TOL = 1e-6  # m
 _RAMP = 0.01  # a constraint counts fully in the averaging once violated by this x its limit (x BAND for samples)
@@ -96,136 +94,7 @@ _DEVICE = "cpu"
 def _kernels() -> SimpleNamespace:
     wp = quiet_warp()
     f64 = wp.float64
-
-    @wp.func
-    def closest_on_triangle(p: wp.vec3d, a: wp.vec3d, b: wp.vec3d, c: wp.vec3d) -> wp.vec3d:
-        """(v, w, feature) of the closest point a + v (b - a) + w (c - a) (Ericson 5.1.5); feature 0 is the
-        interior, 1 + k corner k, 4 + k the edge opposite corner k."""
-        ab = b - a
-        ac = c - a
-        ap = p - a
-        d1 = wp.dot(ab, ap)
-        d2 = wp.dot(ac, ap)
-        if d1 <= f64(0.0) and d2 <= f64(0.0):
-            return wp.vec3d(f64(0.0), f64(0.0), f64(1.0))
-        bp = p - b
-        d3 = wp.dot(ab, bp)
-        d4 = wp.dot(ac, bp)
-        if d3 >= f64(0.0) and d4 <= d3:
-            return wp.vec3d(f64(1.0), f64(0.0), f64(2.0))
-        vc = d1 * d4 - d3 * d2
-        if vc <= f64(0.0) and d1 >= f64(0.0) and d3 <= f64(0.0):
-            return wp.vec3d(d1 / (d1 - d3), f64(0.0), f64(6.0))
-        cp = p - c
-        d5 = wp.dot(ab, cp)
-        d6 = wp.dot(ac, cp)
-        if d6 >= f64(0.0) and d5 <= d6:
-            return wp.vec3d(f64(0.0), f64(1.0), f64(3.0))
-        vb = d5 * d2 - d1 * d6
-        if vb <= f64(0.0) and d2 >= f64(0.0) and d6 <= f64(0.0):
-            return wp.vec3d(f64(0.0), d2 / (d2 - d6), f64(5.0))
-        va = d3 * d6 - d5 * d4
-        if va <= f64(0.0) and (d4 - d3) >= f64(0.0) and (d5 - d6) >= f64(0.0):
-            w = (d4 - d3) / ((d4 - d3) + (d5 - d6))
-            return wp.vec3d(f64(1.0) - w, w, f64(4.0))
-        den = va + vb + vc
-        return wp.vec3d(vb / den, vc / den, f64(0.0))
-
-    @wp.func
-    def face_normal(verts: wp.array(dtype=wp.vec3d), faces: wp.array2d(dtype=wp.int32), f: int) -> wp.vec3d:
-        a = verts[faces[f, 0]]
-        n = wp.cross(verts[faces[f, 1]] - a, verts[faces[f, 2]] - a)
-        length = wp.length(n)
-        if length > f64(1e-30):
-            return n / length
-        return wp.vec3d()
-
-    @wp.func
-    def feature_normal(
-        verts: wp.array(dtype=wp.vec3d),
-        faces: wp.array2d(dtype=wp.int32),
-        face_adj: wp.array2d(dtype=wp.int32),
-        vf_start: wp.array(dtype=wp.int32),
-        vf_face: wp.array(dtype=wp.int32),
-        f: int,
-        feature: int,
-    ) -> wp.vec3d:
-        """Angle-weighted pseudo-normal (unnormalised) of a feature of face f (see closest_on_triangle)."""
-        n = face_normal(verts, faces, f)
-        if feature >= 4:  # edge: the sum of its faces' unit normals
-            g = face_adj[f, feature - 4]
-            if g >= 0:
-                n = n + face_normal(verts, faces, g)
-        elif feature >= 1:  # vertex: its corners' unit normals weighted by the corner angles
-            v = faces[f, feature - 1]
-            n = wp.vec3d()
-            for k in range(vf_start[v], vf_start[v + 1]):
-                g = vf_face[k]
-                c = 0
-                if faces[g, 1] == v:
-                    c = 1
-                elif faces[g, 2] == v:
-                    c = 2
-                a = verts[v]
-                u = verts[faces[g, (c + 1) % 3]] - a
-                w = verts[faces[g, (c + 2) % 3]] - a
-                cosine = wp.dot(u, w) / wp.max(wp.length(u) * wp.length(w), f64(1e-30))
-                n = n + wp.acos(wp.clamp(cosine, f64(-1.0), f64(1.0))) * face_normal(verts, faces, g)
-        return n
-
-    @wp.func
-    def signed_closest(
-        mesh: wp.uint64,
-        verts: wp.array(dtype=wp.vec3d),
-        faces: wp.array2d(dtype=wp.int32),
-        face_adj: wp.array2d(dtype=wp.int32),
-        vf_start: wp.array(dtype=wp.int32),
-        vf_face: wp.array(dtype=wp.int32),
-        p: wp.vec3d,
-        radius: wp.float64,
-    ):
-        """(found, signed distance, closest point, outward unit normal) of p, searched within ``radius``."""
-        q = wp.mesh_query_point_no_sign(mesh, wp.vec3(p), wp.float32(radius) + wp.float32(_SLACK))
-        if not q.result:
-            return 0, radius, wp.vec3d(), wp.vec3d()
-        f = q.face
-        a = verts[faces[f, 0]]
-        b = verts[faces[f, 1]]
-        c = verts[faces[f, 2]]
-        vw = closest_on_triangle(p, a, b, c)
-        cp = a + vw[0] * (b - a) + vw[1] * (c - a)
-        fn = feature_normal(verts, faces, face_adj, vf_start, vf_face, f, int(vw[2]))
-        diff = p - cp
-        dist = wp.length(diff)
-        sign = f64(1.0)
-        if wp.dot(diff, fn) < f64(0.0):
-            sign = f64(-1.0)
-        n = wp.normalize(fn)
-        if dist > f64(1e-12):
-            n = sign * diff / dist
-        return 1, sign * dist, cp, n
-
-    @wp.kernel(enable_backward=False, module="unique")
-    def query_points(
-        mesh: wp.uint64,
-        verts: wp.array(dtype=wp.vec3d),
-        faces: wp.array2d(dtype=wp.int32),
-        face_adj: wp.array2d(dtype=wp.int32),
-        vf_start: wp.array(dtype=wp.int32),
-        vf_face: wp.array(dtype=wp.int32),
-        p: wp.array(dtype=wp.vec3d),
-        radius: wp.float64,
-        found: wp.array(dtype=wp.int32),
-        sd: wp.array(dtype=wp.float64),
-        close: wp.array(dtype=wp.vec3d),
-        normal: wp.array(dtype=wp.vec3d),
-    ):
-        t = wp.tid()
-        ok, s, cp, n = signed_closest(mesh, verts, faces, face_adj, vf_start, vf_face, p[t], radius)
-        found[t] = ok
-        sd[t] = s
-        close[t] = cp
-        normal[t] = n
+    signed_closest = surface_funcs().signed_closest  # the shared exact query (garsim.geometry.inside)
 
     @wp.kernel(enable_backward=False, module="unique")
     def vertex_state(
@@ -245,11 +114,17 @@ def _kernels() -> SimpleNamespace:
         nq: wp.array(dtype=wp.vec3d),
         d: wp.array(dtype=wp.float64),
         active: wp.array(dtype=wp.int32),
+        xs: wp.array(dtype=wp.vec3d),
+        fresh: wp.array(dtype=wp.int32),
     ):
         """Each vertex's signed distance ``d`` (exact, or a lower bound >= ``band``) and whether it has a
         contact half-space (``active``: exact, mobile, within ``band``); (xq, dq, cq, nq) is its last exact
         query. ``first``: query every vertex without a radius."""
         i = wp.tid()
+        fresh[i] = 0
+        if first == 1 or wp.length(x[i] - xs[i]) > f64(0.0):  # moved since the last edge tests (sample_state)
+            fresh[i] = 1
+            xs[i] = x[i]
         moved = wp.length(x[i] - xq[i])
         if first == 1 or moved > f64(0.0):
             bound = dq[i] - moved  # the distance is 1-Lipschitz
@@ -289,6 +164,7 @@ def _kernels() -> SimpleNamespace:
         normal: wp.array2d(dtype=wp.vec3d),
         listed: wp.array(dtype=wp.int32),
         count: wp.array(dtype=wp.int32),
+        fresh: wp.array(dtype=wp.int32),
     ):
         """Whether edge e meets the surface (``hit``: an endpoint inside, or the segment crosses it), and if
         so the half-space of each of its samples nearer than ``keep`` (appended to ``listed`` as
@@ -296,6 +172,8 @@ def _kernels() -> SimpleNamespace:
         e = wp.tid()
         i = edges[e, 0]
         j = edges[e, 1]
+        if hit[e] == 0 and fresh[i] == 0 and fresh[j] == 0:
+            return  # neither end moved since it was found clear (and the obstacle does not move within a call)
         seg = x[j] - x[i]
         length = wp.length(seg)
         hit[e] = 0
@@ -444,106 +322,11 @@ def _kernels() -> SimpleNamespace:
                 x[i] = xi
 
     return SimpleNamespace(
-        query_points=query_points,
         vertex_state=vertex_state,
         sample_state=sample_state,
         violations=violations,
         sweeps=sweeps,
     )
-
-
-def _wp(a: np.ndarray, dtype: Any) -> Any:
-    """A warp CPU array over a numpy array's memory (no copy)."""
-    return quiet_warp().array(a, dtype=dtype, device=_DEVICE, copy=False)
-
-
-# ----------------------------------------------------------------------------------------------------
-# obstacle: a warp BVH per face array, refit per pose
-
-
-class _Obstacle:
-    """A triangle mesh's topology prepared for signed closest-point queries; :meth:`pose` moves it.
-
-    Per face array: the BVH (built once, refit per pose), each face's neighbour across each edge and the
-    faces around each vertex, from which the queries compute the pseudo-normals of the features they hit.
-    """
-
-    def __init__(self, faces: np.ndarray, num_vertices: int) -> None:
-        wp = quiet_warp()
-        f = np.asarray(faces, dtype=np.int64)
-        nf = len(f)
-        # the face across each face edge (edge k opposite corner k); -1 on a boundary
-        a = np.stack([f[:, 1], f[:, 2], f[:, 0]], axis=1).ravel()
-        b = np.stack([f[:, 2], f[:, 0], f[:, 1]], axis=1).ravel()
-        key = np.minimum(a, b) * num_vertices + np.maximum(a, b)
-        order = np.argsort(key, kind="stable")
-        pair = np.flatnonzero(key[order][1:] == key[order][:-1])
-        adj = np.full(3 * nf, -1, dtype=np.int64)
-        adj[order[pair]] = order[pair + 1] // 3
-        adj[order[pair + 1]] = order[pair] // 3
-        # faces around each vertex (CSR)
-        corner_face = np.argsort(f.ravel(), kind="stable") // 3
-        start = np.concatenate([[0], np.cumsum(np.bincount(f.ravel(), minlength=num_vertices))])
-        self.faces = wp.array(f.astype(np.int32), dtype=wp.int32, device=_DEVICE)
-        self.indices = wp.array(f.astype(np.int32).ravel(), dtype=wp.int32, device=_DEVICE)
-        self.face_adj = wp.array(adj.reshape(-1, 3).astype(np.int32), dtype=wp.int32, device=_DEVICE)
-        self.vf_start = wp.array(start.astype(np.int32), dtype=wp.int32, device=_DEVICE)
-        self.vf_face = wp.array(corner_face.astype(np.int32), dtype=wp.int32, device=_DEVICE)
-        self.points32 = wp.zeros(num_vertices, dtype=wp.vec3, device=_DEVICE)
-        self.points = wp.zeros(num_vertices, dtype=wp.vec3d, device=_DEVICE)
-        self.mesh: Any = None
-        self.key: tuple | None = None
-
-    def pose(self, vertices: np.ndarray) -> _Obstacle:
-        """Move the mesh to ``vertices`` (refit the BVH) unless it is there."""
-        v = np.ascontiguousarray(vertices, dtype=np.float64)
-        key = content_key(v)
-        if key == self.key:
-            return self
-        self.points.numpy()[:] = v
-        self.points32.numpy()[:] = v
-        if self.mesh is None:
-            self.mesh = quiet_warp().Mesh(points=self.points32, indices=self.indices)
-        else:
-            self.mesh.refit()
-        self.key = key
-        return self
-
-    @property
-    def inputs(self) -> list:
-        """The leading arguments of every kernel that queries the obstacle."""
-        return [self.mesh.id, self.points, self.faces, self.face_adj, self.vf_start, self.vf_face]
-
-    def query(
-        self, points: np.ndarray, radius: float = UNBOUNDED
-    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """Signed distance (negative inside), closest point, outward unit normal and ``found`` of each point:
-        exact where the surface is within ``radius`` (``found``), else distance ``radius``, zero vectors."""
-        wp = quiet_warp()
-        p = np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 3)
-        m = len(p)
-        found, sd = np.zeros(m, dtype=np.int32), np.zeros(m)
-        close, normal = np.zeros((m, 3)), np.zeros((m, 3))
-        if m:
-            wp.launch(
-                _kernels().query_points,
-                dim=m,
-                inputs=[*self.inputs, _wp(p, wp.vec3d), float(radius)],
-                outputs=[_wp(found, wp.int32), _wp(sd, wp.float64), _wp(close, wp.vec3d), _wp(normal, wp.vec3d)],
-                device=_DEVICE,
-            )
-        return sd, close, normal, found.astype(bool)
-
-
-_OBSTACLES = ContentCache(4)
-
-
-def obstacle(body_vertices: np.ndarray, body_faces: np.ndarray) -> _Obstacle:
-    """The obstacle for a triangle mesh, posed at ``body_vertices``: one per face array (cached by content);
-    a new pose refits it, so use it before asking for another pose of the same faces."""
-    f = np.asarray(body_faces, dtype=np.int64)
-    n = len(body_vertices)
-    return _OBSTACLES.get(content_key(f) + (n,), lambda: _Obstacle(f, n)).pose(body_vertices)
 
 
 # ----------------------------------------------------------------------------------------------------
@@ -590,6 +373,8 @@ def _buffers(n: int, samples: tuple[int, int]) -> dict[str, Any]:
         "dq": (n, wp.float64),
         "d": (n, wp.float64),
         "v_active": (n, wp.int32),
+        "xs": (n, wp.vec3d),
+        "fresh": (n, wp.int32),
         "acc": (n, wp.vec3d),
         "cnt": (n, wp.float64),
         "current": (n, wp.vec3d),
@@ -659,7 +444,7 @@ class _State:
     per garment, obstacle and margin (replaying a launch costs a tenth of packing its arguments again).
     """
 
-    def __init__(self, x: np.ndarray, obs: _Obstacle, con: _Constraints, margin: float) -> None:
+    def __init__(self, x: np.ndarray, obs: Obstacle, con: _Constraints, margin: float) -> None:
         self.con, self.margin = con, margin
         self.buf = con.buffers
         self.buf["x"].numpy()[:] = x
@@ -668,7 +453,7 @@ class _State:
         self.cmd = self.commands(obs)
         self.update(first=True)
 
-    def commands(self, obs: _Obstacle) -> SimpleNamespace:
+    def commands(self, obs: Obstacle) -> SimpleNamespace:
         """The recorded launches of the four kernels on this garment's buffers (cached on the garment)."""
         con, buf, margin = self.con, self.buf, self.margin
         if con.commands is not None and con.commands[0] is obs and con.commands[1] == margin:
@@ -683,6 +468,7 @@ class _State:
         n, ne = buf["x"].shape[0], buf["hit"].shape[0]
         x, d = buf["x"], buf["d"]
         vertex = [x, con.wp_mobile, margin + BAND, 1, buf["xq"], buf["dq"], buf["cq"], buf["nq"], d, buf["v_active"]]
+        vertex += [buf["xs"], buf["fresh"]]
         listed = [buf["s_list"], buf["s_count"]]
         samples = [
             x,
@@ -695,6 +481,7 @@ class _State:
             buf["s_close"],
             buf["s_normal"],
             *listed,
+            buf["fresh"],
         ]
         sweeps = [0, RELAXATION, CHEBYSHEV_RHO, margin, floor, x, con.wp_mobile, con.wp_stretch, con.wp_limit]
         sweeps += [con.wp_moving, con.wp_ts, *listed, buf["s_close"], buf["s_normal"], buf["v_active"]]

@@ -93,3 +93,22 @@ def test_anny_body_pelvis_inside_front_outside_and_timing(anny_body):
     exact = tester.inside(near)
     assert exact[: len(sel)].all() and not exact[len(sel) :].any()
     assert collision_fraction(near, v, n) == pytest.approx(0.5, abs=0.002)
+
+
+def test_exact_obstacle_is_shared_and_agrees_with_the_tester(icosphere):
+    """One exact closest-point implementation (geometry.inside.Obstacle), the one refine uses; it agrees with
+    warp's float32 closest point of InsideTester and signs points like the winding number."""
+    from garsim import refine as refine_module
+    from garsim.geometry.inside import obstacle
+
+    assert refine_module.obstacle is obstacle
+    v, f = icosphere
+    rng = np.random.default_rng(3)
+    p = rng.normal(size=(200, 3)) * 0.6
+    sd, close, normal, found = obstacle(v, f).query(p)
+    assert found.all()
+    tester = InsideTester(v, f)
+    c32, _ = tester.closest(p)
+    assert np.abs(close - c32).max() < 1e-5
+    assert np.array_equal(sd < 0, tester.inside(p))
+    assert np.allclose(np.linalg.norm(normal, axis=1), 1.0)

@@ -8,6 +8,9 @@ The same BVH answers closest-point queries (:meth:`InsideTester.closest`: closes
 face) and segment queries (:meth:`InsideTester.segment_hits`: does a segment meet the surface).
 The one-shot functions (:func:`inside_mask`, :func:`closest_on_mesh`, :func:`segment_hits`) share one
 tester per body, cached by content, so the metrics of several predictions on one body build it once.
+Those answers are warp's float32 ones. :class:`Obstacle` (:func:`obstacle`) is garsim's one exact query: the
+closest point on the triangles recomputed in float64 with its sign from the angle-weighted pseudo-normal of the
+feature it lies on; :func:`surface_funcs` hands its warp functions to kernels elsewhere (``garsim.refine``).
 
 :func:`collision_fraction` is the metric of DeePSD / the paper: each garment vertex is compared
 with its nearest body vertex and that vertex's normal, and counts as colliding when
@@ -17,6 +20,8 @@ with its nearest body vertex and that vertex's normal, and counts as colliding w
 from __future__ import annotations
 
 from functools import lru_cache
+from types import SimpleNamespace
+from typing import Any
 
 import numpy as np
 
@@ -24,6 +29,9 @@ from garsim.geometry.cache import ContentCache, content_key
 from garsim.geometry.proximity import signed_offset_to_nearest
 
 _DEVICE = "cpu"
+UNBOUNDED = 1.0e6
+"""m: the search radius of a query that must find the closest point wherever it is."""
+_SLACK = 1e-5  # m: added to every float32 search radius, far above its rounding (~1e-6 at 10 m from the origin)
 _TESTERS = ContentCache(4)  # per body mesh: the one-shot functions' InsideTester (never handed out)
 
 
@@ -112,6 +120,252 @@ def _kernels():
         out[tid] = hit
 
     return inside_kernel, signed_distance_kernel, closest_kernel, segment_kernel
+
+
+# ----------------------------------------------------------------------------------------------------
+# exact signed closest points on a triangle mesh (float64), the one implementation garsim uses: the obstacle
+# of garsim.refine, and any other exact query (Obstacle.query)
+
+
+@lru_cache(maxsize=1)
+def surface_funcs() -> SimpleNamespace:
+    """The warp functions of the exact signed closest-point query, for kernels elsewhere (garsim.refine) to call:
+    ``signed_closest(mesh, verts, faces, face_adj, vf_start, vf_face, p, radius)`` -> (found, signed distance,
+    closest point, outward unit normal), its parts, and the ``query_points`` kernel behind :meth:`Obstacle.query`."""
+    wp = quiet_warp()
+    f64 = wp.float64
+
+    @wp.func
+    def closest_on_triangle(p: wp.vec3d, a: wp.vec3d, b: wp.vec3d, c: wp.vec3d) -> wp.vec3d:
+        """(v, w, feature) of the closest point a + v (b - a) + w (c - a) (Ericson 5.1.5); feature 0 is the
+        interior, 1 + k corner k, 4 + k the edge opposite corner k."""
+        ab = b - a
+        ac = c - a
+        ap = p - a
+        d1 = wp.dot(ab, ap)
+        d2 = wp.dot(ac, ap)
+        if d1 <= f64(0.0) and d2 <= f64(0.0):
+            return wp.vec3d(f64(0.0), f64(0.0), f64(1.0))
+        bp = p - b
+        d3 = wp.dot(ab, bp)
+        d4 = wp.dot(ac, bp)
+        if d3 >= f64(0.0) and d4 <= d3:
+            return wp.vec3d(f64(1.0), f64(0.0), f64(2.0))
+        vc = d1 * d4 - d3 * d2
+        if vc <= f64(0.0) and d1 >= f64(0.0) and d3 <= f64(0.0):
+            return wp.vec3d(d1 / (d1 - d3), f64(0.0), f64(6.0))
+        cp = p - c
+        d5 = wp.dot(ab, cp)
+        d6 = wp.dot(ac, cp)
+        if d6 >= f64(0.0) and d5 <= d6:
+            return wp.vec3d(f64(0.0), f64(1.0), f64(3.0))
+        vb = d5 * d2 - d1 * d6
+        if vb <= f64(0.0) and d2 >= f64(0.0) and d6 <= f64(0.0):
+            return wp.vec3d(f64(0.0), d2 / (d2 - d6), f64(5.0))
+        va = d3 * d6 - d5 * d4
+        if va <= f64(0.0) and (d4 - d3) >= f64(0.0) and (d5 - d6) >= f64(0.0):
+            w = (d4 - d3) / ((d4 - d3) + (d5 - d6))
+            return wp.vec3d(f64(1.0) - w, w, f64(4.0))
+        den = va + vb + vc
+        return wp.vec3d(vb / den, vc / den, f64(0.0))
+
+    @wp.func
+    def face_normal(verts: wp.array(dtype=wp.vec3d), faces: wp.array2d(dtype=wp.int32), f: int) -> wp.vec3d:
+        a = verts[faces[f, 0]]
+        n = wp.cross(verts[faces[f, 1]] - a, verts[faces[f, 2]] - a)
+        length = wp.length(n)
+        if length > f64(1e-30):
+            return n / length
+        return wp.vec3d()
+
+    @wp.func
+    def feature_normal(
+        verts: wp.array(dtype=wp.vec3d),
+        faces: wp.array2d(dtype=wp.int32),
+        face_adj: wp.array2d(dtype=wp.int32),
+        vf_start: wp.array(dtype=wp.int32),
+        vf_face: wp.array(dtype=wp.int32),
+        f: int,
+        feature: int,
+    ) -> wp.vec3d:
+        """Angle-weighted pseudo-normal (unnormalised) of a feature of face f (see closest_on_triangle)."""
+        n = face_normal(verts, faces, f)
+        if feature >= 4:  # edge: the sum of its faces' unit normals
+            g = face_adj[f, feature - 4]
+            if g >= 0:
+                n = n + face_normal(verts, faces, g)
+        elif feature >= 1:  # vertex: its corners' unit normals weighted by the corner angles
+            v = faces[f, feature - 1]
+            n = wp.vec3d()
+            for k in range(vf_start[v], vf_start[v + 1]):
+                g = vf_face[k]
+                c = 0
+                if faces[g, 1] == v:
+                    c = 1
+                elif faces[g, 2] == v:
+                    c = 2
+                a = verts[v]
+                u = verts[faces[g, (c + 1) % 3]] - a
+                w = verts[faces[g, (c + 2) % 3]] - a
+                cosine = wp.dot(u, w) / wp.max(wp.length(u) * wp.length(w), f64(1e-30))
+                n = n + wp.acos(wp.clamp(cosine, f64(-1.0), f64(1.0))) * face_normal(verts, faces, g)
+        return n
+
+    @wp.func
+    def signed_closest(
+        mesh: wp.uint64,
+        verts: wp.array(dtype=wp.vec3d),
+        faces: wp.array2d(dtype=wp.int32),
+        face_adj: wp.array2d(dtype=wp.int32),
+        vf_start: wp.array(dtype=wp.int32),
+        vf_face: wp.array(dtype=wp.int32),
+        p: wp.vec3d,
+        radius: wp.float64,
+    ):
+        """(found, signed distance, closest point, outward unit normal) of p, searched within ``radius``."""
+        q = wp.mesh_query_point_no_sign(mesh, wp.vec3(p), wp.float32(radius) + wp.float32(_SLACK))
+        if not q.result:
+            return 0, radius, wp.vec3d(), wp.vec3d()
+        f = q.face
+        a = verts[faces[f, 0]]
+        b = verts[faces[f, 1]]
+        c = verts[faces[f, 2]]
+        vw = closest_on_triangle(p, a, b, c)
+        cp = a + vw[0] * (b - a) + vw[1] * (c - a)
+        fn = feature_normal(verts, faces, face_adj, vf_start, vf_face, f, int(vw[2]))
+        diff = p - cp
+        dist = wp.length(diff)
+        sign = f64(1.0)
+        if wp.dot(diff, fn) < f64(0.0):
+            sign = f64(-1.0)
+        n = wp.normalize(fn)
+        if dist > f64(1e-12):
+            n = sign * diff / dist
+        return 1, sign * dist, cp, n
+
+    @wp.kernel(enable_backward=False, module="unique")
+    def query_points(
+        mesh: wp.uint64,
+        verts: wp.array(dtype=wp.vec3d),
+        faces: wp.array2d(dtype=wp.int32),
+        face_adj: wp.array2d(dtype=wp.int32),
+        vf_start: wp.array(dtype=wp.int32),
+        vf_face: wp.array(dtype=wp.int32),
+        p: wp.array(dtype=wp.vec3d),
+        radius: wp.float64,
+        found: wp.array(dtype=wp.int32),
+        sd: wp.array(dtype=wp.float64),
+        close: wp.array(dtype=wp.vec3d),
+        normal: wp.array(dtype=wp.vec3d),
+    ):
+        t = wp.tid()
+        ok, s, cp, n = signed_closest(mesh, verts, faces, face_adj, vf_start, vf_face, p[t], radius)
+        found[t] = ok
+        sd[t] = s
+        close[t] = cp
+        normal[t] = n
+
+    return SimpleNamespace(
+        closest_on_triangle=closest_on_triangle,
+        face_normal=face_normal,
+        feature_normal=feature_normal,
+        signed_closest=signed_closest,
+        query_points=query_points,
+    )
+
+
+def _wp(a: np.ndarray, dtype: Any) -> Any:
+    """A warp CPU array over a numpy array's memory (no copy)."""
+    return quiet_warp().array(a, dtype=dtype, device=_DEVICE, copy=False)
+
+
+# ----------------------------------------------------------------------------------------------------
+# obstacle: a warp BVH per face array, refit per pose
+
+
+class Obstacle:
+    """A triangle mesh's topology prepared for signed closest-point queries; :meth:`pose` moves it.
+
+    Per face array: the BVH (built once, refit per pose), each face's neighbour across each edge and the
+    faces around each vertex, from which the queries compute the pseudo-normals of the features they hit.
+    """
+
+    def __init__(self, faces: np.ndarray, num_vertices: int) -> None:
+        wp = quiet_warp()
+        f = np.asarray(faces, dtype=np.int64)
+        nf = len(f)
+        # the face across each face edge (edge k opposite corner k); -1 on a boundary
+        a = np.stack([f[:, 1], f[:, 2], f[:, 0]], axis=1).ravel()
+        b = np.stack([f[:, 2], f[:, 0], f[:, 1]], axis=1).ravel()
+        key = np.minimum(a, b) * num_vertices + np.maximum(a, b)
+        order = np.argsort(key, kind="stable")
+        pair = np.flatnonzero(key[order][1:] == key[order][:-1])
+        adj = np.full(3 * nf, -1, dtype=np.int64)
+        adj[order[pair]] = order[pair + 1] // 3
+        adj[order[pair + 1]] = order[pair] // 3
+        # faces around each vertex (CSR)
+        corner_face = np.argsort(f.ravel(), kind="stable") // 3
+        start = np.concatenate([[0], np.cumsum(np.bincount(f.ravel(), minlength=num_vertices))])
+        self.faces = wp.array(f.astype(np.int32), dtype=wp.int32, device=_DEVICE)
+        self.indices = wp.array(f.astype(np.int32).ravel(), dtype=wp.int32, device=_DEVICE)
+        self.face_adj = wp.array(adj.reshape(-1, 3).astype(np.int32), dtype=wp.int32, device=_DEVICE)
+        self.vf_start = wp.array(start.astype(np.int32), dtype=wp.int32, device=_DEVICE)
+        self.vf_face = wp.array(corner_face.astype(np.int32), dtype=wp.int32, device=_DEVICE)
+        self.points32 = wp.zeros(num_vertices, dtype=wp.vec3, device=_DEVICE)
+        self.points = wp.zeros(num_vertices, dtype=wp.vec3d, device=_DEVICE)
+        self.mesh: Any = None
+        self.key: tuple | None = None
+
+    def pose(self, vertices: np.ndarray) -> Obstacle:
+        """Move the mesh to ``vertices`` (refit the BVH) unless it is there."""
+        v = np.ascontiguousarray(vertices, dtype=np.float64)
+        key = content_key(v)
+        if key == self.key:
+            return self
+        self.points.numpy()[:] = v
+        self.points32.numpy()[:] = v
+        if self.mesh is None:
+            self.mesh = quiet_warp().Mesh(points=self.points32, indices=self.indices)
+        else:
+            self.mesh.refit()
+        self.key = key
+        return self
+
+    @property
+    def inputs(self) -> list:
+        """The leading arguments of every kernel that queries the obstacle."""
+        return [self.mesh.id, self.points, self.faces, self.face_adj, self.vf_start, self.vf_face]
+
+    def query(
+        self, points: np.ndarray, radius: float = UNBOUNDED
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """Signed distance (negative inside), closest point, outward unit normal and ``found`` of each point:
+        exact where the surface is within ``radius`` (``found``), else distance ``radius``, zero vectors."""
+        wp = quiet_warp()
+        p = np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 3)
+        m = len(p)
+        found, sd = np.zeros(m, dtype=np.int32), np.zeros(m)
+        close, normal = np.zeros((m, 3)), np.zeros((m, 3))
+        if m:
+            wp.launch(
+                surface_funcs().query_points,
+                dim=m,
+                inputs=[*self.inputs, _wp(p, wp.vec3d), float(radius)],
+                outputs=[_wp(found, wp.int32), _wp(sd, wp.float64), _wp(close, wp.vec3d), _wp(normal, wp.vec3d)],
+                device=_DEVICE,
+            )
+        return sd, close, normal, found.astype(bool)
+
+
+_OBSTACLES = ContentCache(4)
+
+
+def obstacle(body_vertices: np.ndarray, body_faces: np.ndarray) -> Obstacle:
+    """The obstacle for a triangle mesh, posed at ``body_vertices``: one per face array (cached by content);
+    a new pose refits it, so use it before asking for another pose of the same faces."""
+    f = np.asarray(body_faces, dtype=np.int64)
+    n = len(body_vertices)
+    return _OBSTACLES.get(content_key(f) + (n,), lambda: Obstacle(f, n)).pose(body_vertices)
 
 
 def _as_points(points: np.ndarray, what: str = "points") -> np.ndarray:
