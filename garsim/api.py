@@ -241,6 +241,36 @@ def make_sample(
     return Scene.make(body_canonical, garment, fabric, pinned, garment_type, up, units).sample(body_target)
 
 
+@dataclasses.dataclass(frozen=True)
+class SequenceConfig:
+    """Defaults of :meth:`GarSim.drape_sequence` (``garsim animate`` takes its defaults from here)."""
+
+    smoothing: float = 2.0
+    """Temporal smoothing of the network's correction, in frames (the standard deviation of a Gaussian; 0: off).
+    On the walk cycle it brings the raw network's jitter (1.5-3x the prior's) to about the prior's."""
+
+
+def check_smoothing(smoothing: Any) -> float:
+    """A temporal smoothing in frames: a finite number >= 0 (0: off), else a one-line ValueError."""
+    try:
+        sigma = float(smoothing)
+    except (TypeError, ValueError):
+        raise ValueError(f"smoothing is a number of frames >= 0, got {smoothing!r}") from None
+    if not (np.isfinite(sigma) and 0.0 <= sigma <= 100.0):
+        raise ValueError(f"smoothing is a number of frames in [0, 100] (0: off), got {smoothing!r}")
+    return sigma
+
+
+def smooth_corrections(frames: np.ndarray, priors: np.ndarray, sigma: float) -> np.ndarray:
+    """(T, N, 3) frames whose correction to the prior is Gaussian-smoothed over time (std ``sigma`` frames,
+    the ends extended by their nearest frame): ``priors + g_sigma * (frames - priors)``."""
+    from scipy.ndimage import gaussian_filter1d
+
+    correction = np.asarray(frames, np.float64) - priors
+    smoothed = gaussian_filter1d(correction, sigma, axis=0, mode="nearest", truncate=3.0)
+    return (priors + smoothed).astype(np.float32)
+
+
 _COARSE = ContentCache(8, scope="garment")  # per garment: its decimated copy and the maps both ways
 
 
@@ -256,8 +286,11 @@ def postprocess(
 ) -> np.ndarray:
     """The API's post-process of a raw prediction: physical refinement (``garsim.refine``) or, with
     ``refine=False``, the push-out along the soft anchor's normal, to ``collision_margin`` metres outside the
-    target body (None: the raw prediction); the sample's pinned vertices then follow the prior exactly."""
+    target body (None: the raw prediction). The sample's pinned vertices follow the prior exactly, before the
+    refinement (which never moves them, so their edges are refined against where they end) and after; the
+    refinement also takes the prior as its ``fallback`` for vertices the network put deep inside the body."""
     pred = np.array(pred, dtype=np.float32)
+    pred[sample.pinned] = sample.prior[sample.pinned]
     if collision_margin is not None and refine:
         from garsim.model.inputs import sample_fabric
         from garsim.refine import refine as refine_garment
@@ -271,6 +304,7 @@ def postprocess(
             fabric=sample_fabric(sample),
             pinned=sample.pinned,
             margin=collision_margin,
+            fallback=sample.prior,
         )
     elif collision_margin is not None:
         normals = cached_vertex_normals(sample.body_target, sample.body_faces)
@@ -338,12 +372,19 @@ class GarSim:
         correction = self.model.predict(low_sample) - low_prior
         return (sample.prior + transfer_barycentric(correction, to_full)).astype(np.float32)
 
+    def raw(self, sample: Sample) -> np.ndarray:
+        """The network's garment for a prepared sample before any post-process (the prior when there is no model)."""
+        return np.array(sample.prior, dtype=np.float32) if self.model is None else self._network(sample)
+
+    def finish(self, pred: np.ndarray, sample: Sample) -> np.ndarray:
+        """This GarSim's post-process of a raw garment (:func:`postprocess`; none for the bare prior)."""
+        if self.model is None and not self.refine:
+            return np.array(pred, dtype=np.float32)
+        return postprocess(pred, sample, self.collision_margin, self.refine)
+
     def predict(self, sample: Sample) -> np.ndarray:
         """The model's garment for a prepared sample (the prior when there is no model), post-processed."""
-        if self.model is None and not self.refine:
-            return np.array(sample.prior, dtype=np.float32)
-        pred = np.array(sample.prior, dtype=np.float32) if self.model is None else self._network(sample)
-        return postprocess(pred, sample, self.collision_margin, self.refine)
+        return self.finish(self.raw(sample), sample)
 
     @property
     def name(self) -> str:
@@ -436,8 +477,14 @@ class GarSim:
         progress: bool = False,
         up: str = "z",
         units: str = "m",
+        smoothing: float = SequenceConfig.smoothing,
     ) -> np.ndarray:
         """The garment on every target body of a sequence: (T, N, 3).
+
+        ``smoothing`` (frames, >= 0; 0 turns it off): the network's correction to the prior, G - G^prior, is
+        smoothed over time with a Gaussian of this standard deviation before the post-process of each frame (the
+        prior carries the motion, so only the network's frame-to-frame noise is removed; the whole sequence is
+        known, so the filter is centred and adds no lag). The bare prior is never smoothed.
 
         ``body_targets`` is a sequence of meshes (or vertex arrays sharing the canonical body's faces) or a
         (T, Vb, 3) array. Per-garment and per-body work is done once per sequence: validating the canonical body and
@@ -448,11 +495,20 @@ class GarSim:
         targets = list(body_targets)
         if not targets:
             raise ValueError("body_targets is empty: give at least one target body")
+        sigma = check_smoothing(smoothing)
         scene = Scene.make(body_canonical, garment, fabric, pinned, up=up, units=units)  # once per sequence
         from tqdm import tqdm
 
-        frames = [
-            from_internal(self.predict(scene.sample(t)), up, units).astype(np.float32)
-            for t in tqdm(targets, disable=not progress, unit="frame")
-        ]
+        with tqdm(total=2 * len(targets), disable=not progress, unit="step") as bar:
+            samples, raw = [], []
+            for t in targets:
+                samples.append(scene.sample(t))
+                raw.append(self.raw(samples[-1]))
+                bar.update()
+            if sigma > 0 and len(raw) > 1:
+                raw = list(smooth_corrections(np.stack(raw), np.stack([s.prior for s in samples]), sigma))
+            frames = []
+            for sample, pred in zip(samples, raw):
+                frames.append(from_internal(self.finish(pred, sample), up, units).astype(np.float32))
+                bar.update()
         return np.stack(frames)

@@ -337,7 +337,7 @@ def cmd_animate(args: argparse.Namespace) -> int:
         raise ValueError(f"--frames must be >= 2 and --fps > 0, got {args.frames} and {args.fps}")
     import numpy as np
 
-    from garsim.api import GarSim, fabric_fields
+    from garsim.api import GarSim, SequenceConfig, check_smoothing, fabric_fields
     from garsim.export import animation_files, export_animation
     from garsim.geometry.io import load_mesh, load_mesh_with_attributes
 
@@ -346,6 +346,7 @@ def cmd_animate(args: argparse.Namespace) -> int:
             if given and _same_file(o, given):
                 raise ValueError(f"--out {out} would overwrite the input {flag} {given} (as {o}); write elsewhere")
     fabric_fields(args.fabric)
+    smoothing = check_smoothing(SequenceConfig.smoothing if args.smoothing is None else args.smoothing)
     gv, gf, attributes = load_mesh_with_attributes(args.garment)
     garment = (gv, gf)
     uvs = attributes.vertex_uvs(gf, len(gv))  # the animation formats store one UV per vertex
@@ -369,9 +370,22 @@ def cmd_animate(args: argparse.Namespace) -> int:
         faces = canonical[1]
         targets = _load_targets(Path(args.targets), faces)
     sim = GarSim.prior_only() if args.prior_only else GarSim.pretrained()
-    frames = sim.drape_sequence(canonical, targets, garment, fabric=args.fabric, progress=not args.quiet)
+    frames = sim.drape_sequence(
+        canonical, targets, garment, fabric=args.fabric, progress=not args.quiet, smoothing=smoothing
+    )
     extra = {} if uvs is None else {"uvs": uvs}
-    written = export_animation(out, frames, gf, body_frames=np.stack(targets), body_faces=faces, fps=args.fps, **extra)
+    from garsim import __version__
+
+    metadata = {
+        "generator": f"garsim {__version__}",
+        "model": sim.name,
+        "fabric": args.fabric,
+        "refine": sim.refine,
+        "temporal_smoothing_frames": smoothing if sim.model is not None else 0.0,  # the bare prior is never smoothed
+    }
+    written = export_animation(
+        out, frames, gf, metadata=metadata, body_frames=np.stack(targets), body_faces=faces, fps=args.fps, **extra
+    )
     for path in written:
         print(path)
     return 0
@@ -646,6 +660,17 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--fps", type=float, default=30.0, help="frames per second of the animation")
     p.add_argument("--out", required=True, help=f"output file ({', '.join(ANIMATION_OUTPUTS)})")
     p.add_argument("--prior-only", action="store_true", help="use the skinning prior, not the model")
+    _config_default(
+        p.add_argument(
+            "--smoothing",
+            type=float,
+            help="temporal smoothing of the network's correction to the prior, in frames (Gaussian std; 0: off); "
+            "recorded in the output's metadata",
+        ),
+        "garsim.api",
+        "SequenceConfig",
+        "smoothing",
+    )
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=cmd_animate)
 

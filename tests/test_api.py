@@ -167,9 +167,45 @@ def test_pinned_vertices_follow_the_prior_and_sequences_match_single_drapes(anny
     out = sim.drape(bodies[0], bodies[1], (g.vertices, g.faces), pinned=pins)
     prior = GarSim.prior_only().drape(bodies[0], bodies[1], (g.vertices, g.faces))
     np.testing.assert_array_equal(out[pins], prior[pins])
-    seq = sim.drape_sequence(bodies[0], [c.vertices, t.vertices], (g.vertices, g.faces), pinned=pins)
+    seq = sim.drape_sequence(bodies[0], [c.vertices, t.vertices], (g.vertices, g.faces), pinned=pins, smoothing=0)
     assert seq.shape == (2, len(g.vertices), 3)
     np.testing.assert_allclose(seq[1], out, atol=1e-6)
+
+
+class _Spiky:
+    """A stand-in model: the prior plus a constant offset, and in one frame (counted by calls) a spike."""
+
+    def __init__(self, spike_call: int, spike: float, offset: float = 0.01):
+        self.calls, self.spike_call, self.spike, self.offset = 0, spike_call, spike, offset
+
+    def predict(self, sample):
+        out = np.array(sample.prior, dtype=np.float32) + np.float32(self.offset)
+        if self.calls == self.spike_call:
+            out[:, 2] += np.float32(self.spike)
+        self.calls += 1
+        return out
+
+
+def test_sequence_smoothing_filters_the_correction_over_time(anny_body, scene):
+    """smoothing=s is a centred Gaussian (std s frames) over the network's correction to the prior: a constant
+    correction stays, a one-frame spike h becomes h * w0 at its frame (w0 the kernel's centre weight)."""
+    c, t, g = scene
+    bodies = [(c.vertices, anny_body.faces)] + [(c.vertices + [0.0, 0.0, 0.001 * k], anny_body.faces) for k in range(7)]
+    prior = GarSim.prior_only().drape_sequence(bodies[0], bodies[1:], (g.vertices, g.faces))
+    spike, sigma = 0.02, 1.5
+    kw = dict(collision_margin=None, refine=False)
+    plain = GarSim(_Spiky(3, spike), **kw).drape_sequence(bodies[0], bodies[1:], (g.vertices, g.faces), smoothing=0)
+    smooth = GarSim(_Spiky(3, spike), **kw).drape_sequence(
+        bodies[0], bodies[1:], (g.vertices, g.faces), smoothing=sigma
+    )
+    np.testing.assert_allclose(plain[:, :, :2] - prior[:, :, :2], 0.01, atol=1e-6)  # the constant part
+    np.testing.assert_allclose(smooth[:, :, :2] - prior[:, :, :2], 0.01, atol=1e-6)  # ... is kept
+    k = np.exp(-0.5 * (np.arange(-5, 6) / sigma) ** 2)
+    k /= k.sum()
+    np.testing.assert_allclose(smooth[3, :, 2] - prior[3, :, 2] - 0.01, spike * k[5], atol=1e-6)
+    np.testing.assert_allclose(smooth[4, :, 2] - prior[4, :, 2] - 0.01, spike * k[4], atol=1e-6)
+    with pytest.raises(ValueError, match="smoothing"):
+        GarSim.prior_only().drape_sequence(bodies[0], bodies[1:], (g.vertices, g.faces), smoothing=-1)
 
 
 def test_pinned_auto_pins_the_top_border_loops_in_the_canonical_frame(anny_body, scene):

@@ -667,3 +667,25 @@ def test_train_on_some_families_only(tmp_path):
     assert main([*args, "--val-every", "2", "--quiet"]) == 0
     assert json.loads((run / "sequences.json").read_text()) == {"train": ["train-00006"], "val": []}
     assert (run / "best" / "model.safetensors").exists()
+
+
+def test_animate_records_model_and_smoothing_in_the_file(tmp_path, anny_body):
+    """The animation says what made it: model, refinement and the temporal smoothing applied (USD layer data)."""
+    import json
+
+    from pxr import Sdf
+
+    from garsim.garments.templates import make_garment
+    from garsim.geometry.io import save_mesh
+
+    g = make_garment("skirt", anny_body, target_vertices=300)
+    save_mesh(tmp_path / "skirt.obj", g.vertices, g.faces)
+    base = ["animate", "--garment", str(tmp_path / "skirt.obj"), "--motion", "walk", "--frames", "3", "--quiet"]
+    assert main([*base, "--smoothing", "1.5", "--out", str(tmp_path / "a.usda")]) == 0
+    meta = json.loads(Sdf.Layer.FindOrOpen(str(tmp_path / "a.usda")).customLayerData["garsim"])
+    assert meta["model"] == "GarSim model + refine" and meta["temporal_smoothing_frames"] == 1.5
+    assert main([*base, "--prior-only", "--out", str(tmp_path / "p.usda")]) == 0
+    meta = json.loads(Sdf.Layer.FindOrOpen(str(tmp_path / "p.usda")).customLayerData["garsim"])
+    assert meta["model"] == "skinning prior" and meta["temporal_smoothing_frames"] == 0.0
+    assert main([*base, "--smoothing", "-1", "--out", str(tmp_path / "b.usda")]) == 2
+    assert not (tmp_path / "b.usda").exists()

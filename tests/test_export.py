@@ -413,3 +413,151 @@ def test_read_only_folder_fails(tmp_path, garment):
     finally:
         ro.chmod(0o700)
         assert os.listdir(ro) == []
+
+
+# ----------------------------------------------------------------------------- metadata
+
+METADATA = {"model": "garsim v0.4", "temporal_smoothing_frames": 1.5, "refine": True}
+
+
+def _obj_metadata(path: Path) -> dict | None:
+    """The ``# garsim {json}`` comment line of an OBJ, parsed as plain text (None without one)."""
+    found = [line[len("# garsim ") :] for line in path.read_text().splitlines() if line.startswith("# garsim {")]
+    assert len(found) <= 1
+    return json.loads(found[0]) if found else None
+
+
+@pytest.mark.parametrize("ext", [".glb", ".gltf"])
+def test_gltf_metadata_in_asset_extras(tmp_path, garment, body, ext):
+    import trimesh
+
+    frames, faces, uvs = garment
+    nested = METADATA | {"nested": {"frames": [0, 1, 2], "note": 'quotes " and \\ and é'}, "none": None}
+    (p,) = export_animation(
+        tmp_path / f"drape{ext}", frames, faces, body_frames=body[0], body_faces=body[1], uvs=uvs, metadata=nested
+    )
+    doc, _ = _read_gltf(p)
+    assert doc["asset"]["extras"]["garsim"] == nested
+    assert doc["asset"]["version"] == "2.0"
+    assert doc["extras"]["frames"] == T  # the existing extras stay
+    scene = trimesh.load(p, force="scene")
+    assert scene.metadata["garsim"] == nested  # trimesh surfaces scene extras
+    assert len(scene.geometry) == 2
+    # without metadata nothing is added
+    (q,) = export_animation(tmp_path / f"plain{ext}", frames, faces)
+    doc, _ = _read_gltf(q)
+    assert "extras" not in doc["asset"] and "extras" not in doc["scenes"][0]
+
+
+@pytest.mark.parametrize("ext", [".usda", ".usdc", ".usd"])
+def test_usd_metadata_in_custom_layer_data(tmp_path, garment, ext):
+    from pxr import Sdf, Usd
+
+    frames, faces, uvs = garment
+    nested = METADATA | {"nested": {"frames": [0, 1, 2], "note": 'quotes " and \\ and é'}, "none": None}
+    (p,) = export_animation(tmp_path / f"drape{ext}", frames, faces, uvs=uvs, metadata=nested)
+    layer = Sdf.Layer.FindOrOpen(str(p))
+    assert json.loads(layer.customLayerData["garsim"]) == nested
+    assert layer.documentation == "garsim garment animation"
+    stage = Usd.Stage.Open(str(p))
+    assert json.loads(stage.GetRootLayer().customLayerData["garsim"]) == nested
+    assert stage.GetPrimAtPath("/Scene/Garment")
+    (q,) = export_animation(tmp_path / f"plain{ext}", frames, faces)
+    assert "garsim" not in Sdf.Layer.FindOrOpen(str(q)).customLayerData
+
+
+def test_pc2_metadata_in_obj_comment(tmp_path, garment, body):
+    import trimesh
+
+    from garsim.geometry.io import load_mesh
+
+    frames, faces, uvs = garment
+    files = export_animation(
+        tmp_path / "drape.pc2", frames, faces, body_frames=body[0], body_faces=body[1], uvs=uvs, metadata=METADATA
+    )
+    obj = tmp_path / "drape.obj"
+    assert obj in files
+    lines = obj.read_text().splitlines()
+    assert lines[0] == "# garsim export" and lines[1].startswith("# garsim {")
+    assert _obj_metadata(obj) == METADATA
+    assert _obj_metadata(tmp_path / "drape_body.obj") is None  # the metadata goes with the garment
+    # the OBJ still reads, in vertex order, with garsim's loader and trimesh
+    v, f = load_mesh(obj)
+    _close(v, frames[0])
+    np.testing.assert_array_equal(f, faces)
+    m = trimesh.load(obj, process=False, maintain_order=True)
+    _close(np.asarray(m.vertices), frames[0])
+    np.testing.assert_array_equal(np.asarray(m.faces), faces)
+    cache, _, _ = read_pc2(tmp_path / "drape.pc2")
+    _close(cache, frames)
+
+
+def test_obj_sequence_metadata_on_every_frame(tmp_path, garment):
+    frames, faces, uvs = garment
+    odd = {"text": "line\nbreak é"}
+    paths = write_obj_sequence(tmp_path, frames, faces, uvs=uvs, metadata=odd)
+    assert [_obj_metadata(p) for p in paths] == [odd] * T
+    assert all(len(p.read_text().splitlines()[1]) == len(p.read_text().splitlines()[1].encode()) for p in paths)
+
+
+@pytest.mark.parametrize("ext", [".mp4", ".gif"])
+def test_preview_accepts_and_ignores_metadata(tmp_path, garment, ext):
+    frames, faces, _ = garment
+    (p,) = export_animation(tmp_path / f"p{ext}", frames[:2], faces, size=32, metadata=METADATA)
+    assert p.stat().st_size > 0
+
+
+def _bad_metadata():
+    return {
+        "a list": [("model", "x")],
+        "a string": '{"model": "x"}',
+        "a set value": {"frames": {1, 2}},
+        "an array value": {"weights": np.zeros(3)},
+        "nan": {"smoothing": float("nan")},
+        "inf deep": {"a": [1, {"b": float("inf")}]},
+        "int key": {1: "x"},
+        "object value": {"path": Path("x")},
+    }
+
+
+@pytest.mark.parametrize("ext", [".glb", ".gltf", ".usda", ".usdc", ".pc2", ".gif", ".mp4"])
+def test_bad_metadata_raises_and_writes_nothing(tmp_path, garment, body, ext):
+    frames, faces, _ = garment
+    for label, bad in _bad_metadata().items():
+        with pytest.raises(ExportError, match="metadata") as info:
+            export_animation(
+                tmp_path / f"out{ext}", frames, faces, body_frames=body[0], body_faces=body[1], metadata=bad
+            )
+        assert "\n" not in str(info.value), label
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_bad_metadata_in_each_writer(tmp_path, garment):
+    from garsim.export import write_obj
+
+    frames, faces, _ = garment
+    bad = {"when": object()}
+    for call in [
+        lambda: write_gltf_animation(tmp_path / "a.glb", frames, faces, metadata=bad),
+        lambda: write_usd_animation(tmp_path / "a.usda", frames, faces, metadata=bad),
+        lambda: write_preview(tmp_path / "a.gif", frames, faces, metadata=bad),
+        lambda: write_obj(tmp_path / "a.obj", frames[0], faces, metadata=bad),
+        lambda: write_obj_sequence(tmp_path, frames, faces, metadata=bad),
+    ]:
+        with pytest.raises(ExportError, match=r"metadata\['when'\]: type object is not JSON-serialisable"):
+            call()
+    loop: dict = {}
+    loop["self"] = loop
+    with pytest.raises(ExportError, match="contains itself"):
+        write_gltf_animation(tmp_path / "a.glb", frames, faces, metadata=loop)
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_metadata_normalised_to_json(tmp_path, garment):
+    from collections import OrderedDict
+
+    frames, faces, _ = garment
+    given = OrderedDict(frames=(1, 2), scale=np.float32(0.5), count=np.int64(3), flag=np.bool_(True))
+    (p,) = export_animation(tmp_path / "a.glb", frames, faces, metadata=given)
+    doc, _ = _read_gltf(p)
+    assert doc["asset"]["extras"]["garsim"] == {"frames": [1, 2], "scale": 0.5, "count": 3, "flag": True}

@@ -138,6 +138,7 @@ def bench_inference(
     "first_call_wall_ms", "api_cpu_ms", "repeats"}}`` (medians over ``repeats`` calls after one warm-up;
     ``first_call_wall_ms`` is the very first call, with the body's caches cold; ``pose_seq_*``
     the same garment on ``repeats`` different target poses; ``api_cpu_ms`` ``GarSim.drape`` on mesh pairs;
+    ``sequence_fps_*`` frames per second of ``GarSim.drape_sequence`` over those poses (defaults, first frame apart);
     ``refine_correct_cpu_ms`` / ``refine_valid_cpu_ms`` from :func:`bench_refine` on those poses).
     """
     from garsim.bodies.anny import AnnyBody
@@ -189,6 +190,10 @@ def bench_inference(
                 clear_all("garment")
                 _, _, c = _timed(lambda: sim.drape(*mesh_args, fabric=fabric))
                 api_cpu.append(c)
+            # a pose sequence through the public call (defaults: refine, temporal smoothing), after its first frame
+            seq_meshes = [(t.vertices, body.faces) for t in sequence]
+            sim.drape_sequence(mesh_args[0], seq_meshes[:1], mesh_args[2], fabric=fabric)
+            _, seq_w, seq_c = _timed(lambda: sim.drape_sequence(mesh_args[0], seq_meshes, mesh_args[2], fabric=fabric))
             if pred.shape != gar.vertices.shape or not np.isfinite(pred).all():
                 raise RuntimeError(
                     f"the model returned {pred.shape} (finite: {np.isfinite(pred).all()}) "
@@ -203,6 +208,8 @@ def bench_inference(
                 "pose_seq_wall_ms": float(np.median(seq_wall)),
                 "first_call_wall_ms": float(first_wall),
                 "api_cpu_ms": float(np.median(api_cpu)),
+                "sequence_fps_cpu": 1000.0 * len(seq_meshes) / seq_c,
+                "sequence_fps_wall": 1000.0 * len(seq_meshes) / seq_w,
                 **refine_ms,
                 "repeats": int(repeats),
             }
@@ -274,6 +281,7 @@ def format_bench(results: Mapping[int, Mapping[str, float]]) -> str:
             f"same garment, new pose: cpu {r['pose_seq_cpu_ms']:.1f} ms; "
             f"first call (cold body) {r['first_call_wall_ms']:.0f} ms; "
             f"GarSim.drape on mesh pairs: cpu {r['api_cpu_ms']:.1f} ms; "
+            f"drape_sequence {r['sequence_fps_cpu']:.0f} fps (cpu); "
             f"refine (new pose): correcting {r['refine_correct_cpu_ms']:.1f} ms, "
             f"valid {r['refine_valid_cpu_ms']:.1f} ms"
         )

@@ -5,6 +5,11 @@
 order is kept in every format. Files are written atomically; bad input raises :class:`ExportError`
 (a ``ValueError``) before anything is written.
 
+``metadata`` (a JSON-serialisable dict: which model made the drape, temporal smoothing, ...) is stored
+where each format keeps such data: glTF ``asset.extras.garsim`` (and ``scenes[0].extras.garsim``), USD
+root-layer ``customLayerData["garsim"]`` (JSON text), PC2 a ``# garsim {json}`` comment line in the OBJ
+beside the cache; MP4/GIF previews carry none.
+
 ========================  ===============================================================
 ``.glb`` / ``.gltf``      :func:`write_gltf_animation` - morph target per frame, Y up
 ``.usd/.usda/.usdc``      :func:`write_usd_animation` - time-sampled points, Z up, metres
@@ -16,10 +21,11 @@ order is kept in every format. Files are written atomically; bad input raises :c
 from __future__ import annotations
 
 import os
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
-from garsim.export._common import ExportError, check_body, check_frames, check_output
+from garsim.export._common import ExportError, check_body, check_frames, check_metadata, check_output
 from garsim.export.gltf import GLTF_EXTENSIONS, write_gltf_animation
 from garsim.export.pc2 import PC2_EXTENSIONS, read_pc2, write_obj, write_obj_sequence, write_pc2
 from garsim.export.usd import USD_EXTENSIONS, write_usd_animation
@@ -51,21 +57,31 @@ def animation_files(path: str | os.PathLike, with_body: bool = False) -> list[Pa
     return [p, p.with_suffix(".obj")] + ([body, body.with_suffix(".obj")] if with_body else [])
 
 
-def export_animation(path: str | os.PathLike, frames: Any, faces: Any, **kw: Any) -> list[Path]:
+def export_animation(
+    path: str | os.PathLike,
+    frames: Any,
+    faces: Any,
+    metadata: Mapping[str, Any] | None = None,
+    **kw: Any,
+) -> list[Path]:
     """Write a garment animation in the format named by ``path``'s extension -> the files written (main first).
 
     Keyword arguments go to the writer (``body_frames``, ``body_faces``, ``fps``, ``uvs``, ...).
+    ``metadata``: a JSON-serialisable dict (e.g. ``{"model": ..., "temporal_smoothing_frames": ...}``),
+    checked before anything is written and stored where the format keeps such data (see the module
+    docstring); MP4/GIF previews carry none.
     ``.pc2`` also writes ``<stem>.obj`` (frame 0, the mesh to attach the cache to; ``uvs``/``normals``
     go there) and, with a body, ``<stem>_body.pc2`` + ``<stem>_body.obj``; ``fps`` is ignored for PC2.
     """
     p, ext = check_output(path, SUPPORTED_EXTENSIONS, "export_animation")
+    meta = check_metadata(metadata)
     if ext in GLTF_EXTENSIONS:
-        return [write_gltf_animation(p, frames, faces, **kw)]
+        return [write_gltf_animation(p, frames, faces, metadata=meta, **kw)]
     if ext in USD_EXTENSIONS:
-        return [write_usd_animation(p, frames, faces, **kw)]
+        return [write_usd_animation(p, frames, faces, metadata=meta, **kw)]
     if ext in VIDEO_EXTENSIONS:
-        return [write_preview(p, frames, faces, **kw)]
-    return _export_pc2(p, frames, faces, **kw)
+        return [write_preview(p, frames, faces, metadata=meta, **kw)]
+    return _export_pc2(p, frames, faces, metadata=meta, **kw)
 
 
 def _export_pc2(
@@ -79,8 +95,10 @@ def _export_pc2(
     start: float = 0.0,
     rate: float = 1.0,
     fps: float | None = None,
+    metadata: Mapping[str, Any] | None = None,
 ) -> list[Path]:
     del fps  # PC2 stores frames, not seconds
+    meta = check_metadata(metadata)  # PC2 has no metadata: it goes to the garment's OBJ
     v = check_frames(frames)
     body = check_body(body_frames, body_faces, v.shape[0])
     first_normals = None
@@ -90,7 +108,7 @@ def _export_pc2(
         first_normals = normals
     # the OBJ first: it validates faces/uvs/normals before the cache exists
     files = animation_files(p, with_body=body is not None)
-    obj = write_obj(files[1], v[0], faces, uvs=uvs, normals=first_normals)
+    obj = write_obj(files[1], v[0], faces, uvs=uvs, normals=first_normals, metadata=meta)
     out = [write_pc2(p, v, start=start, rate=rate), obj]
     if body is not None:
         out.append(write_pc2(files[2], body[0], start=start, rate=rate))

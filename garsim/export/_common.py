@@ -2,14 +2,16 @@
 
 Every writer checks, before any work: the extension, that the output folder can be written, then
 the arrays: ``frames`` (T, N, 3) finite, ``faces`` (F, 3) integer indices in [0, N), optional body
-frames (T, Vb, 3) with the same T, UVs (N, 2), normals (N, 3) or (T, N, 3). Problems raise
-:class:`ExportError` (a ``ValueError``) with a one-line message.
+frames (T, Vb, 3) with the same T, UVs (N, 2), normals (N, 3) or (T, N, 3), and ``metadata`` (a dict
+of JSON values). Problems raise :class:`ExportError` (a ``ValueError``) with a one-line message.
 """
 
 from __future__ import annotations
 
+import json
+import math
 import os
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any
 
@@ -147,6 +149,51 @@ def check_fps(fps: Any) -> float:
     if not np.isfinite(value) or value <= 0:
         raise ExportError(f"fps must be a positive number, got {fps!r}")
     return value
+
+
+def _json_value(x: Any, where: str) -> Any:
+    """``x`` as plain JSON data (dict/list/str/int/float/bool/None); numpy scalars become Python numbers."""
+    if isinstance(x, np.generic) and x.dtype.kind in "biuf":
+        x = x.item()
+    if x is None or isinstance(x, (str, bool, int)):
+        return x
+    if isinstance(x, float):
+        if not math.isfinite(x):
+            raise ExportError(f"{where}: {x!r} is not valid JSON; use a finite number, a string or None")
+        return x
+    if isinstance(x, Mapping):
+        out = {}
+        for key, value in x.items():
+            if not isinstance(key, str):
+                raise ExportError(f"{where}: keys must be strings, got {type(key).__name__} {key!r}")
+            out[key] = _json_value(value, f"{where}[{key!r}]")
+        return out
+    if isinstance(x, (list, tuple)):
+        return [_json_value(value, f"{where}[{i}]") for i, value in enumerate(x)]
+    raise ExportError(
+        f"{where}: type {type(x).__name__} is not JSON-serialisable; use dicts, lists, strings, numbers, bools or None"
+    )
+
+
+def check_metadata(metadata: Any) -> dict[str, Any] | None:
+    """A JSON-serialisable dict (copied as plain dict/list/str/number/bool/None values), or None.
+
+    Tuples become lists and numpy scalars Python numbers; anything else JSON cannot hold (sets, arrays,
+    objects, NaN/inf, non-string keys) raises :class:`ExportError` naming the offending entry.
+    """
+    if metadata is None:
+        return None
+    if not isinstance(metadata, Mapping):
+        raise ExportError(f"metadata must be a dict of JSON values, got {type(metadata).__name__}")
+    try:
+        return _json_value(metadata, "metadata")
+    except RecursionError:
+        raise ExportError("metadata is nested too deeply or contains itself; pass a plain JSON-like dict") from None
+
+
+def metadata_json(metadata: Mapping[str, Any]) -> str:
+    """Compact one-line ASCII JSON of validated metadata (keys in the given order)."""
+    return json.dumps(metadata, separators=(",", ":"), allow_nan=False)
 
 
 def atomic_write_ext(path: Path, write: Callable[[str], None]) -> Path:

@@ -6,7 +6,10 @@ frame k holding ``frame_k - frame_0`` (target 0 is all zeros). One animation dri
 exactly (STEP holds it until the next key; LINEAR blends neighbouring frames in between).
 Vertex order is kept; per-vertex UVs go to TEXCOORD_0 (v flipped to glTF's top-left origin) and
 normals to NORMAL (per-frame normals as NORMAL morph targets). Target names are stored in
-``mesh.extras.targetNames`` (Blender names the shape keys after them).
+``mesh.extras.targetNames`` (Blender names the shape keys after them). The document's ``extras``
+hold ``fps``, ``frames``, ``up`` and ``metersPerUnit``; caller ``metadata`` (which model, smoothing, ...)
+goes to ``asset.extras.garsim`` and, so that trimesh (``scene.metadata``) and Blender (scene custom
+properties) show it, to ``scenes[0].extras.garsim`` as well.
 
 Written with numpy + json + struct only. Viewers differ in how many morph targets they animate
 (Blender imports all of them as shape keys; some web viewers cap active targets); keep previews short.
@@ -18,6 +21,7 @@ import base64
 import json
 import os
 import struct
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
@@ -30,6 +34,7 @@ from garsim.export._common import (
     check_faces,
     check_fps,
     check_frames,
+    check_metadata,
     check_normals,
     check_output,
     check_uvs,
@@ -147,13 +152,15 @@ def write_gltf_animation(
     y_up: bool = True,
     normals: Any = None,
     interpolation: str = "LINEAR",
+    metadata: Mapping[str, Any] | None = None,
 ) -> Path:
     """Write a garment sequence (and optional body) as a morph-target-animated glTF; returns the path.
 
     ``frames`` (T, N, 3) and ``body_frames`` (T, Vb, 3) in garsim's Z-up metres; ``y_up=True``
     rotates to glTF's Y up ((x, y, z) -> (x, z, -y)). ``uvs`` (N, 2), ``normals`` (N, 3) or (T, N, 3)
     belong to the garment. ``interpolation``: "LINEAR" or "STEP"; both show frame k exactly at k / fps.
-    ``.glb`` is one binary file; ``.gltf`` embeds the buffer as base64.
+    ``.glb`` is one binary file; ``.gltf`` embeds the buffer as base64. ``metadata``: a JSON-serialisable
+    dict stored as ``asset.extras.garsim`` (and ``scenes[0].extras.garsim``).
     """
     p, ext = check_output(path, GLTF_EXTENSIONS, "write_gltf_animation")
     v = check_frames(frames)
@@ -165,6 +172,7 @@ def write_gltf_animation(
     interp = str(interpolation).upper()
     if interp not in ("LINEAR", "STEP"):
         raise ExportError(f"interpolation must be 'LINEAR' or 'STEP', got {interpolation!r}")
+    meta = check_metadata(metadata)
     if y_up:
         v = to_y_up(v)
         n = None if n is None else to_y_up(n)
@@ -220,6 +228,9 @@ def write_gltf_animation(
         "buffers": [{"byteLength": b.offset}],
         "extras": {"fps": fps, "frames": num, "up": "Y" if y_up else "Z", "metersPerUnit": 1.0},
     }
+    if meta is not None:
+        doc["asset"]["extras"] = {"garsim": meta}
+        doc["scenes"][0]["extras"] = {"garsim": meta}
     blob = b.blob()
     if ext == ".glb":
         data = _glb(doc, blob)

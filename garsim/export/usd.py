@@ -6,11 +6,16 @@ Each mesh has ``points`` (and ``extent``) sampled at time codes 0 .. T-1, triang
 ``primvars:st`` (vertex interpolation) and ``normals``. Stage metadata: ``upAxis = Z``,
 ``metersPerUnit = 1`` (garsim's convention, no conversion), ``timeCodesPerSecond = framesPerSecond = fps``,
 ``startTimeCode = 0``, ``endTimeCode = T - 1``. ``.usd`` is written as binary crate (usdc).
+
+Caller ``metadata`` (which model, smoothing, ...) goes to the root layer's ``customLayerData`` under
+``"garsim"`` as a JSON string (USD dictionaries cannot hold lists or None), read back with
+``json.loads(Sdf.Layer.FindOrOpen(path).customLayerData["garsim"])``.
 """
 
 from __future__ import annotations
 
 import os
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
@@ -22,9 +27,11 @@ from garsim.export._common import (
     check_faces,
     check_fps,
     check_frames,
+    check_metadata,
     check_normals,
     check_output,
     check_uvs,
+    metadata_json,
 )
 
 USD_EXTENSIONS: tuple[str, ...] = (".usd", ".usda", ".usdc")
@@ -69,12 +76,14 @@ def write_usd_animation(
     fps: float = 30,
     uvs: Any = None,
     normals: Any = None,
+    metadata: Mapping[str, Any] | None = None,
 ) -> Path:
     """Write a garment sequence (and optional body) as an animated USD stage; returns the path.
 
     ``frames`` (T, N, 3) Z-up metres (written as is: the stage declares upAxis Z, metersPerUnit 1);
     frame k is time code k and plays at ``fps``. ``uvs`` (N, 2) and ``normals`` ((N, 3) or (T, N, 3))
-    belong to the garment.
+    belong to the garment. ``metadata``: a JSON-serialisable dict, stored as JSON text in the root layer's
+    ``customLayerData["garsim"]``.
     """
     p, _ = check_output(path, USD_EXTENSIONS, "write_usd_animation")
     v = check_frames(frames)
@@ -83,6 +92,7 @@ def write_usd_animation(
     fps = check_fps(fps)
     u = check_uvs(uvs, v.shape[1])
     n = check_normals(normals, v.shape[0], v.shape[1])
+    meta = check_metadata(metadata)
 
     from pxr import Usd, UsdGeom
 
@@ -100,6 +110,8 @@ def write_usd_animation(
         _define_mesh(stage, "/Scene/Body", body[0], body[1], None, None)
     layer = stage.GetRootLayer()
     layer.documentation = "garsim garment animation"
+    if meta is not None:
+        layer.customLayerData = {"garsim": metadata_json(meta)}
 
     def write(tmp: str) -> None:
         if not layer.Export(tmp):

@@ -3,13 +3,14 @@
 Every kept frame is rendered by :func:`garsim.geometry.render.render_image` (body grey, garment
 blue) with one fixed camera for the whole clip, framed on the bounding box of all frames. Long
 sequences are subsampled evenly to at most ``max_frames`` images; the clip keeps the sequence's
-duration (T / fps), so the video's frame rate drops accordingly.
+duration (T / fps), so the video's frame rate drops accordingly. Previews carry no metadata: the
+``metadata`` keyword is validated (like every exporter's) and otherwise ignored.
 """
 
 from __future__ import annotations
 
 import os
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -22,6 +23,7 @@ from garsim.export._common import (
     check_faces,
     check_fps,
     check_frames,
+    check_metadata,
     check_output,
 )
 
@@ -63,12 +65,14 @@ def write_preview(
     max_frames: int = 120,
     uvs: Any = None,
     normals: Any = None,
+    metadata: Mapping[str, Any] | None = None,
 ) -> Path:
     """Render a short preview clip of a garment sequence (and optional body) to .mp4 or .gif; returns the path.
 
     ``size``: image height in pixels (width follows the framing and the number of ``views``).
     ``uvs``/``normals`` are accepted for a uniform :func:`garsim.export.export_animation` call and ignored
-    (the renderer shades with its own smooth normals).
+    (the renderer shades with its own smooth normals). ``metadata`` is checked like every exporter's and
+    ignored: MP4/GIF previews carry none (keep it in the GLB/USD/PC2 export beside them).
     """
     from garsim.geometry.render import render_image
 
@@ -81,7 +85,8 @@ def write_preview(
         raise ExportError(f"size must be at least 16 pixels, got {size}")
     if int(max_frames) < 1:
         raise ExportError(f"max_frames must be at least 1, got {max_frames}")
-    del uvs, normals
+    check_metadata(metadata)
+    del uvs, normals, metadata
     views = [views] if isinstance(views, (str, int, float)) else list(views)
 
     keep = _frame_indices(v.shape[0], int(max_frames))
