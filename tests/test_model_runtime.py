@@ -96,7 +96,7 @@ def test_drape_path_imports_neither_torch_nor_trimesh(tmp_path: Path) -> None:
     save_mesh(tmp_path / "g.obj", sample.garment, sample.garment_faces)
     code = (
         "import sys; from garsim.cli import main; "
-        f"rc = main(['drape', '--canonical', 'a.obj', '--target', 'b.obj', '--garment', 'g.obj', '--out', 'd.obj']); "
+        "rc = main(['drape', '--canonical', 'a.obj', '--target', 'b.obj', '--garment', 'g.obj', '--out', 'd.obj']); "
         "print(sorted(m for m in ('torch', 'torch_geometric', 'trimesh') if m in sys.modules), rc)"
     )
     out = subprocess.run([sys.executable, "-c", code], cwd=tmp_path, capture_output=True, text=True, timeout=300)
