@@ -13,7 +13,15 @@ gets wrong and a viewer notices, and leaves everything else exactly where the ne
     edge with a pinned end inside the obstacle cannot leave it and is left alone;
 (d) a small bending term: the correction (not the shape) is diffused once to the one-ring with a
     weight from the fabric's bending length, so a stiff fabric lifts its neighbours a little with a
-    pushed vertex. A valid drape has no correction, so this never moves it.
+    pushed vertex. A valid drape has no correction, so this never moves it;
+(e) optional ``fallback`` (the API passes the skinning prior): before (a)-(d), a mobile vertex the prediction
+    put deeper than ``FALLBACK_DEPTH`` inside the obstacle is blended towards the fallback, with a weight that
+    rises smoothly with depth (0 at ``FALLBACK_DEPTH``, 1 at ``FALLBACK_DEPTH`` + ``FALLBACK_RAMP``), is
+    spread over a few rings of the mesh (so a patch moves as a whole and fades out at its border) and is
+    scaled down where the fallback itself is inside (0 once it is ``FALLBACK_DEPTH`` inside). Pushed out to
+    its own nearest surface point, a patch sunk past a limb's centre line would wrap the limb's far side
+    (stretched ~R / (R - depth), neighbours on opposite sides, edges through it); the prior follows the limb
+    by skinning, on the right side of it. A valid drape has nothing that deep, so this never moves it.
 
 Algorithm: position-based dynamics with Jacobi sweeps (order-independent, so the result does not
 depend on vertex order), averaged by the number of active constraints per vertex (counted smoothly: a
@@ -80,6 +88,12 @@ RELAXATION = 1.0
 CHEBYSHEV_RHO = 0.95
 """Spectral radius estimate of the Chebyshev acceleration (0 = plain Jacobi; 0.99 converges a stretched
 sleeve faster but overshoots into compression and oscillates against contacts)."""
+FALLBACK_DEPTH = 0.01
+"""m: a mobile vertex deeper than this inside the obstacle starts to be blended towards the ``fallback``."""
+FALLBACK_RAMP = 0.01
+"""m: ... and is blended fully (weight 1) this much deeper (a smoothstep in between)."""
+FALLBACK_PASSES = 4
+"""Passes that spread the fallback weight over the mesh (w = max(w, mean of w over the closed one-ring))."""
 _STRETCH_TOL = 1e-3  # relative: an edge within limit * (1 + this) counts as satisfied
 _DIST_TOL = 1e-6  # m
 _RAMP = 0.01  # a constraint counts fully in the averaging once violated by this x its limit (x BAND for samples)
@@ -352,6 +366,7 @@ class _Constraints:
         deg = np.bincount(e.ravel(), minlength=n).astype(np.float64)
         self.inv_degree = np.where(deg > 0, 1.0 / np.maximum(deg, 1.0), 0.0)
         self.moving_edges = e[moving]
+        self.closed_inv_degree = 1.0 / (deg + 1.0)
         self.wp_mobile = wp.array(self.mobile, dtype=wp.float64, device=_DEVICE)
         self.wp_stretch = wp.array(self.stretch_edges.astype(np.int32).reshape(-1, 2), dtype=wp.int32, device=_DEVICE)
         self.wp_limit = wp.array(self.limit, dtype=wp.float64, device=_DEVICE)
@@ -445,7 +460,7 @@ class _State:
     """
 
     def __init__(self, x: np.ndarray, obs: Obstacle, con: _Constraints, margin: float) -> None:
-        self.con, self.margin = con, margin
+        self.con, self.margin, self.obs = con, margin, obs
         self.buf = con.buffers
         self.buf["x"].numpy()[:] = x
         self.buf["previous"].numpy()[:] = x
@@ -529,6 +544,21 @@ class _State:
         )
         x += (alpha * con.mobile)[:, None] * (nb * con.inv_degree[:, None] - delta)
 
+    def fall_back(self, prior: np.ndarray) -> np.ndarray | None:
+        """Blend the mobile vertices deep inside the obstacle towards ``prior`` (see :func:`fallback_weight`);
+        returns the blended garment, or None (nothing moved) when no vertex is deeper than ``FALLBACK_DEPTH``."""
+        con = self.con
+        w = fallback_weight(self.buf["d"].numpy(), con.edges, con.closed_inv_degree) * con.mobile
+        if not w.any():
+            return None
+        use = np.flatnonzero(w)
+        w[use] *= _smoothstep((self.obs.query(prior[use])[0] + FALLBACK_DEPTH) / FALLBACK_RAMP)
+        x = self.buf["x"].numpy()
+        x += w[:, None] * (prior - x)
+        self.buf["previous"].numpy()[:] = x
+        self.update()
+        return x.copy()
+
     def project_contacts(self) -> bool:
         """Move every mobile vertex closer than the margin to it along its normal; False if there was none."""
         d = self.buf["d"].numpy()
@@ -543,6 +573,27 @@ class _State:
         return self.buf["x"].numpy()
 
 
+def _smoothstep(t: np.ndarray) -> np.ndarray:
+    t = np.clip(t, 0.0, 1.0)
+    return t * t * (3.0 - 2.0 * t)
+
+
+def fallback_weight(d: np.ndarray, edges: np.ndarray, closed_inv_degree: np.ndarray) -> np.ndarray:
+    """Weight (N,) in [0, 1] of the fallback at each vertex from its signed distance ``d`` (N,) to the obstacle:
+    0 above -``FALLBACK_DEPTH``, 1 below -(``FALLBACK_DEPTH`` + ``FALLBACK_RAMP``), a smoothstep between; then
+    ``FALLBACK_PASSES`` times w = max(w, mean of w over the vertex and its neighbours along ``edges``), so that a
+    patch moves as a whole and its border fades over a few rings. Continuous in ``d``; 0 where nothing is deep."""
+    w = _smoothstep((-np.asarray(d, np.float64) - FALLBACK_DEPTH) / FALLBACK_RAMP)
+    if not w.any() or len(edges) == 0:
+        return w
+    n = len(w)
+    for _ in range(FALLBACK_PASSES):
+        ring = np.bincount(edges[:, 0], weights=w[edges[:, 1]], minlength=n)
+        ring += np.bincount(edges[:, 1], weights=w[edges[:, 0]], minlength=n)
+        w = np.maximum(w, (w + ring) * closed_inv_degree)
+    return w
+
+
 def refine(
     garment: np.ndarray,
     template: np.ndarray,
@@ -554,12 +605,17 @@ def refine(
     iterations: int = 10,
     margin: float = 0.002,
     max_stretch: float | None = None,
+    fallback: np.ndarray | None = None,
 ) -> np.ndarray:
     """Project a predicted garment onto the stretch-limit and no-penetration constraints (see module doc).
 
     ``garment`` (N, 3) the prediction on the target body, ``template`` (N, 3) its rest shape (edge rest
     lengths), ``faces`` (F, 3); ``body_vertices`` / ``body_faces`` any closed, outward-oriented
-    triangle mesh as the obstacle; ``pinned`` (N,) bool vertices that never move. Returns (N, 3) in
+    triangle mesh as the obstacle; ``pinned`` (N,) bool vertices that never move; ``fallback`` (N, 3), optional,
+    a garment on the right side of the obstacle's parts (the skinning prior): mobile vertices more than
+    ``FALLBACK_DEPTH`` inside the obstacle are first blended towards it (:func:`fallback_weight`, spread over the
+    mesh so that a patch moves as a whole), where pushing them out to the nearest surface would wrap them
+    around the wrong side of a limb. Returns (N, 3) in
     the garment's float dtype (float64 for integer input); a garment that violates nothing is returned
     unchanged.
     """
@@ -567,6 +623,7 @@ def refine(
     n = len(x_in)
     tpl = _points(template, "template", n)
     f = _faces(faces, "faces", n)
+    fb = None if fallback is None else np.asarray(_points(fallback, "fallback", n), dtype=np.float64)
     bv = _points(body_vertices, "body_vertices")
     bf = _faces(body_faces, "body_faces", len(bv))
     if len(bf) == 0:
@@ -597,6 +654,10 @@ def refine(
     if not state.violated():
         return np.array(x_in, dtype=out_dtype)
 
+    if fb is not None:
+        blended = state.fall_back(fb)
+        if blended is not None:
+            x0 = blended
     alpha = smoothing_weight(fab, state.con.mean_edge)
     for rnd in range(MAX_ROUNDS):
         state.sweep(iterations)

@@ -238,3 +238,81 @@ def test_deterministic_and_independent_of_what_ran_before(sphere):
     assert np.array_equal(refine(x, cap, f, bv, bf, "cotton"), first)
     clear_all()  # a BVH built anew: a point on an edge may get its closest point from the other face
     np.testing.assert_allclose(refine(x, cap, f, bv, bf, "cotton"), first, rtol=0, atol=1e-12)
+
+
+def _sleeve(radius: float = 0.045, length: float = 0.3, nu: int = 32, nv: int = 21):
+    """An open cylinder (a sleeve) of ``radius`` around the y axis, ``nu`` x ``nv`` vertices, outward faces."""
+    th = np.arange(nu) * 2 * np.pi / nu
+    tt, yy = np.meshgrid(th, np.linspace(-length / 2, length / 2, nv), indexing="ij")
+    v = np.stack([radius * np.cos(tt).ravel(), yy.ravel(), radius * np.sin(tt).ravel()], 1)
+    idx = np.arange(nu * nv).reshape(nu, nv)
+    a, b = idx[:, :-1].ravel(), idx[:, 1:].ravel()
+    c, d = np.roll(idx, -1, 0)[:, 1:].ravel(), np.roll(idx, -1, 0)[:, :-1].ravel()
+    return v, np.concatenate([np.stack([a, d, c], 1), np.stack([a, c, b], 1)])
+
+
+@pytest.fixture(scope="module")
+def arm():
+    """A limb: a capsule of radius 4 cm along y; a sleeve 5 mm outside it; a patch of the sleeve's top pushed
+    6 cm down into the limb, its core past the limb's centre line (2.5 cm inside, nearer the far side)."""
+    limb = trimesh.creation.capsule(height=0.5, radius=0.04, count=[32, 32])
+    limb.apply_transform(trimesh.transformations.rotation_matrix(np.pi / 2, [1, 0, 0]))
+    bv, bf = np.asarray(limb.vertices), np.asarray(limb.faces, dtype=np.int64)
+    tpl, f = _sleeve()
+    r = np.linalg.norm(tpl - np.array([0.0, 0.0, 0.045]), axis=1)
+    bump = np.clip(1 - (r / 0.06) ** 2, 0, 1) ** 2
+    x = tpl - 0.06 * bump[:, None] * np.array([0.0, 0.0, 1.0])
+    return bv, bf, tpl, f, x
+
+
+def test_sleeve_patch_inside_a_limb_comes_back_with_the_fallback(arm):
+    """Pushed to their nearest surface, the patch's vertices past the centre line would wrap the limb's far
+    side (the sleeve torn around it); blended towards the fallback (the prior, on the right side) they come
+    back as a whole: outside, no edge through the limb, edges within 1.5x."""
+    bv, bf, tpl, f, x = arm
+    d = _signed(x, bv, bf)
+    assert d.min() < -0.025 and (d < -0.01).sum() > 10
+    e = unique_edges(f)
+    ts = np.linspace(0.0, 1.0, 21)
+
+    def through(out):
+        s = (1 - ts[None, :, None]) * out[e[:, 0], None] + ts[None, :, None] * out[e[:, 1], None]
+        return _signed(s.reshape(-1, 3), bv, bf).min() < 0.0
+
+    plain = refine(x, tpl, f, bv, bf, "cotton")  # without the fallback: torn around the limb
+    assert _stretch(plain, tpl, f).max() > 1.5
+    out = refine(x, tpl, f, bv, bf, "cotton", fallback=tpl)
+    assert _signed(out, bv, bf).min() >= 0.002 - 1e-5
+    assert not through(out)
+    r = _stretch(out, tpl, f)
+    assert r.max() <= 1.5 and np.percentile(r, 99) <= 1.15
+    assert np.abs(out - tpl).max() < 0.02  # back near the sleeve it was pushed from
+
+
+def test_fallback_keeps_valid_drapes_pins_symmetry_and_continuity(arm):
+    bv, bf, tpl, f, x = arm
+    far = tpl + np.array([0.0, 0.0, 0.3])  # a fallback anywhere: unused where nothing is deep inside
+    assert np.array_equal(refine(tpl, tpl, f, bv, bf, "cotton", fallback=far), tpl)
+    shallow = tpl - 0.012 * (tpl[:, 2:] > 0.04) * np.array([0.0, 0.0, 1.0])  # < 1 cm inside: not blended
+    np.testing.assert_array_equal(
+        refine(shallow, tpl, f, bv, bf, "cotton", fallback=far), refine(shallow, tpl, f, bv, bf, "cotton")
+    )
+    pinned = np.zeros(len(x), dtype=bool)
+    pinned[::5] = True
+    out = refine(x, tpl, f, bv, bf, "cotton", pinned=pinned, fallback=tpl)
+    assert np.array_equal(out[pinned], x[pinned])
+    base = refine(x, tpl, f, bv, bf, "cotton", fallback=tpl)
+    perm = np.random.default_rng(1).permutation(len(x))
+    inv = np.argsort(perm)
+    out_p = refine(x[perm], tpl[perm], inv[f], bv, bf, "cotton", fallback=tpl[perm])
+    assert np.abs(out_p[inv] - base).max() <= 1e-5
+    th = 0.7
+    rot = np.array([[np.cos(th), -np.sin(th), 0], [np.sin(th), np.cos(th), 0], [0, 0, 1.0]])
+    shift = np.array([0.3, -0.2, 0.1])
+    m = lambda p: p @ rot.T + shift  # noqa: E731
+    out_r = refine(m(x), m(tpl), f, m(bv), bf, "cotton", fallback=m(tpl))
+    assert np.abs((out_r - shift) @ rot - base).max() <= 1e-5
+    noise = np.random.default_rng(2).normal(0.0, 1e-6, x.shape)
+    assert np.abs(refine(x + noise, tpl, f, bv, bf, "cotton", fallback=tpl) - base).max() < 5e-4
+    with pytest.raises(ValueError, match="fallback"):
+        refine(x, tpl, f, bv, bf, "cotton", fallback=tpl[:-1])
