@@ -520,7 +520,15 @@ def cmd_bench(args: argparse.Namespace) -> int:
     if args.out:
         _check_output(args.out, (".json",), "--out")
     from garsim.api import GarSim
-    from garsim.eval.bench import bench_inference, bench_newton, format_bench
+    from garsim.eval.bench import (
+        bench_cold_call,
+        bench_inference,
+        bench_newton,
+        bench_ratios,
+        format_bench,
+        format_bench_markdown,
+        machine_info,
+    )
     from garsim.model.runtime import GarSimRuntime
 
     sim = GarSim.load(args.model) if args.model else GarSim.pretrained()
@@ -530,23 +538,42 @@ def cmd_bench(args: argparse.Namespace) -> int:
         from garsim.model.garsim import GarSimModel
 
         reference = GarSimModel.load(args.model or WEIGHTS_DIR)
-    report: dict = {
-        "garsim": bench_inference(
-            sim.model, args.sizes, repeats=args.repeats, garment=args.garment, reference=reference
-        )
-    }
+    report: dict = {"machine": machine_info(threads=1)}
+    report["garsim"] = bench_inference(
+        sim.model, args.sizes, repeats=args.repeats, garment=args.garment, reference=reference
+    )
     print(format_bench(report["garsim"]))
-    paper_s = {600: 0.1, 2400: 1.0}  # the paper's reported inference times (Sec. 5)
-    for n, r in report["garsim"].items():
-        if n in paper_s:
-            print(f"{n} v: {1000 * paper_s[n] / r['wall_ms']:.1f}x faster than the paper's {paper_s[n]} s")
+    cold_sizes = [n for n in args.sizes if args.cold_max is None or n <= args.cold_max]
+    if cold_sizes:  # `garsim drape` in a fresh process: always the shipped model
+        report["cold"] = bench_cold_call(cold_sizes, garment=args.garment)
+        for n, r in report["cold"].items():
+            print(
+                f"{n} v: cold first call (garsim drape, fresh process) {r['cold_call_wall_ms'] / 1000:.2f} s, "
+                f"peak RSS {r['cold_call_peak_rss_mb']:.0f} MiB"
+            )
     if args.newton:
         report["newton"] = bench_newton(args.sizes, garment=args.garment)
-        for n, r in report["newton"].items():
-            ratio = r["wall_ms"] / report["garsim"][n]["wall_ms"]
-            print(f"{n} v: Newton {r['wall_ms'] / 1000:.1f} s ({r['frames']} frames) = {ratio:.0f}x GarSim's time")
+    report["ratios"] = bench_ratios(report)
+    for n, q in report["ratios"].items():
+        if "paper_over_api" in q:
+            print(f"{n} v: GarSim.drape {q['paper_over_api']:.1f}x faster than the paper's {q['paper_s']} s")
+        if "newton_over_api" in q:
+            r = report["newton"][n]
+            print(f"{n} v: Newton {r['wall_ms'] / 1000:.1f} s ({r['frames']} frames) = {q['newton_over_api']:.0f}x")
     if args.out:
-        print(_write_json(args.out, report))
+        from garsim.atomic import atomic_write_bytes
+        from garsim.eval.plots import plot_bench
+
+        out = Path(args.out)
+        command = " ".join(
+            ["garsim bench", *(["--model", args.model] if args.model else []), "--sizes", *map(str, args.sizes)]
+            + ["--garment", args.garment, "--repeats", str(args.repeats), *(["--newton"] if args.newton else [])]
+            + ([f"--cold-max {args.cold_max}"] if args.cold_max is not None else [])
+            + ["--out", str(out)]
+        )
+        print(_write_json(out, report))
+        print(atomic_write_bytes(out.with_suffix(".md"), format_bench_markdown(report, command).encode()))
+        print(plot_bench(report, out.with_suffix(".png")))
     return 0
 
 
@@ -750,7 +777,14 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--garment", default="skirt", help="garment family timed")
     p.add_argument("--repeats", type=int, default=9, help="timed repeats per size (the median is reported)")
     p.add_argument("--newton", action="store_true", help="also time the Newton simulation of the same drape")
-    p.add_argument("--out", help="write the timings to this .json file")
+    p.add_argument(
+        "--cold-max",
+        type=int,
+        metavar="N",
+        help="time the cold first call (garsim drape, shipped model, fresh process) only up to N vertices "
+        "(0: none; default: every size)",
+    )
+    p.add_argument("--out", help="write the timings to this .json file, a .md table and a .png log-log plot beside it")
     p.set_defaults(func=cmd_bench)
 
     data = command("data", "ground-truth datasets: generate, info, verify").add_subparsers(

@@ -66,3 +66,44 @@ def plot_bars(values: dict[str, dict[str, float]], ylabel: str, title: str, out_
     ax.legend()
     fig.tight_layout()
     return atomic_write(out_png, lambda tmp: fig.savefig(tmp, format="png"))
+
+
+def plot_bench(report: dict, out_png: str | os.PathLike) -> Path:
+    """Log-log garment vertices vs ms from a ``garsim bench`` report: the network forward, one ``GarSim.drape``
+    of a new garment and of a new pose, the refinement, a frame of ``drape_sequence`` (CPU medians), the cold
+    first call in a fresh process and Newton's simulation when present (wall), and the paper's reported times."""
+
+    def row(section: str, n: object) -> dict:
+        part = report.get(section) or {}
+        return part.get(n) or part.get(str(n)) or part.get(int(n)) or {}
+
+    garsim = report["garsim"]
+    sizes = list(garsim)
+    verts = [garsim[n]["vertices"] for n in sizes]
+    series = {
+        "network forward": [garsim[n]["forward_cpu_ms"] for n in sizes],
+        "GarSim.drape, new garment": [garsim[n]["api_cpu_ms"] for n in sizes],
+        "GarSim.drape, new pose": [garsim[n].get("api_new_pose_cpu_ms") for n in sizes],
+        "refine": [garsim[n]["refine_correct_cpu_ms"] for n in sizes],
+        "sequence frame": [1000.0 / garsim[n]["sequence_fps_cpu"] for n in sizes],
+        "cold call, fresh process (wall)": [row("cold", n).get("cold_call_wall_ms") for n in sizes],
+        "Newton simulation (wall)": [row("newton", n).get("wall_ms") for n in sizes],
+    }
+    fig = _figure()
+    ax = fig.subplots()
+    for label, ys in series.items():
+        points = [(x, y) for x, y in zip(verts, ys) if y is not None and y > 0]
+        if points:
+            xs, vals = zip(*points)
+            ax.plot(xs, vals, marker="o", ms=4, label=label, ls="--" if "wall" in label else "-")
+    from garsim.eval.bench import PAPER_S  # the paper's reported inference times (Sec. 5), s
+
+    ax.plot(list(PAPER_S), [1000.0 * s for s in PAPER_S.values()], "k*", ms=10, ls="none", label="paper (reported)")
+    ax.set(xscale="log", yscale="log", xlabel="garment vertices", ylabel="ms (CPU; cold call and Newton: wall)")
+    machine = report.get("machine") or {}
+    threads = (machine.get("thread_env") or {}).get("OMP_NUM_THREADS")
+    ax.set_title(f"garsim bench: {machine.get('cpu', '')}, OMP_NUM_THREADS={threads}".strip())
+    ax.grid(True, which="both", lw=0.3, alpha=0.5)
+    ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.01, 1.0))  # outside: the lines span the axes
+    fig.tight_layout()
+    return atomic_write(out_png, lambda tmp: fig.savefig(tmp, format="png"))
