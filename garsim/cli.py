@@ -452,6 +452,8 @@ def cmd_data_verify(args: argparse.Namespace) -> int:
 
 def cmd_train(args: argparse.Namespace) -> int:
     _check_folder(args.out)
+    if args.remesh_copies is not None and args.remesh_copies < 0:
+        raise ValueError(f"--remesh-copies must be >= 0, got {args.remesh_copies}")
     from garsim.model.baselines import load_model
     from garsim.model.config import GarSimConfig
     from garsim.train.data import train_val_samples
@@ -470,6 +472,7 @@ def cmd_train(args: argparse.Namespace) -> int:
         "threads": args.threads,
         "model": init.kind if init is not None else args.model,
         "device": args.device,
+        "remesh_copies": args.remesh_copies,
     }
     losses = {"col": args.collision_weight, "eps": args.collision_eps, "dir": args.direction_weight}
     cfg = TrainConfig(
@@ -480,10 +483,19 @@ def cmd_train(args: argparse.Namespace) -> int:
         resume=not args.restart,
         **{k: v for k, v in given.items() if v is not None},
     )
-    print(f"training on {len(train)} samples, validating on {len(val)} ({args.resolution} resolution)")
     if int(os.environ.get("RANK", "0")) == 0:  # record which sequences this run saw (the store may grow later)
         ids = {name: sorted({s.meta["seq_id"] for s in part}) for name, part in (("train", train), ("val", val))}
         _write_json(Path(args.out) / "sequences.json", ids)
+    if cfg.remesh_copies:  # remeshed variants of the training samples' full meshes; validation stays as stored
+        from garsim.train.augment import remesh_augmented
+
+        full = train
+        if args.resolution != "full":
+            full, _ = train_val_samples(args.data, resolution="full", val_every=args.val_every, families=args.families)
+        originals = len(train)
+        train = remesh_augmented(train, full, cfg.remesh_copies, seed=cfg.seed)
+        print(f"remeshing: {len(train) - originals} variants of {len(full)} full-resolution training samples")
+    print(f"training on {len(train)} samples, validating on {len(val)} ({args.resolution} resolution)")
     model_config = init.config if init is not None else GarSimConfig(**({"head": args.head} if args.head else {}))
     history = Trainer(model_config, cfg, train, val or None, init=init).fit()
     if history:
@@ -759,6 +771,16 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument("--restart", action="store_true", help="ignore an existing checkpoint in --out")
     _config_default(p.add_argument("--threads", type=int, help="torch threads per process"), *trainer, "threads")
+    _config_default(
+        p.add_argument(
+            "--remesh-copies",
+            type=int,
+            help="remeshed variants per training sample: its full mesh decimated to a random size between the low "
+            "level's and 0.7x full, truth and prior carried over (validation is never augmented)",
+        ),
+        *trainer,
+        "remesh_copies",
+    )
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=cmd_train)
 

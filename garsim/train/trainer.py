@@ -81,6 +81,7 @@ class TrainConfig:
     threads: int = 1  # torch threads per process: more thrash (~30x slower) when the cores are shared
     device: str = "cpu"  # "cpu" (the documented path), "cuda", "cuda:N", or "auto" (CUDA when present)
     model: str = "garsim"  # a key of baselines.MODELS: "garsim", or "deepsd" (the DeePSD-style baseline)
+    remesh_copies: int = 0  # remeshed variants per training sample (garsim.train.augment; `garsim train` applies it)
 
     def to_dict(self) -> dict[str, Any]:
         """Plain JSON dict."""
