@@ -191,6 +191,60 @@ def test_killing_the_parent_leaves_no_worker(tmp_path):
     assert not alive, f"workers {alive} outlived their parent"
 
 
+def test_armhole_poses_keep_the_arms_near_their_canonical_position(tmp_path, monkeypatch):
+    """Shoulder elevation is the sampler's angle (0 = T-pose), the canonical arm is degrees above the A-pose:
+    the everyday range of a garment with armholes is centred on its canonical arms, in the sampler's angle."""
+    import garsim.bodies.poses as poses
+
+    assert gen.armhole_elevation_range(gen.T_POSE_ARM) == (-50.0, 25.0)
+    assert gen.armhole_elevation_range(0.0) == (-75.0, -15.0)  # A-pose: -40; -90 clipped to the everyday -75
+    assert gen.armhole_elevation_range(20.0) == (-70.0, 5.0)
+    seen = []
+
+    class Sampler:
+        def __init__(self, limits, seed, body):
+            seen.append(limits)
+
+        def sample(self, n):
+            return [{}] * n
+
+    monkeypatch.setattr(poses, "PoseSampler", Sampler)
+    jobs = plan_jobs(GenerateConfig(out=tmp_path, num_train=12, num_test=0, num_ood=0))
+    for job in jobs:
+        seen.clear()
+        gen.target_poses(job, body=None)
+        for limits in seen:
+            if job.family in gen.ARMHOLE_FAMILIES:
+                assert limits.shoulder_elevation == gen.armhole_elevation_range(job.canonical_arm)
+            else:
+                assert (
+                    limits.shoulder_elevation == poses.EVERYDAY_LIMITS.shoulder_elevation
+                    or limits == poses.JointLimits()
+                )
+
+
+@pytest.mark.slow
+def test_a_tshirt_over_heavy_hips_settles_without_stretching():
+    """A t-shirt whose hem reaches the thighs of a heavy, muscular body (job train-00002 of seed 1) used to
+    follow the body's waist-hip-thigh profile and stretched 1.52x over the thighs as it slid under its own
+    weight; below the waist its tube now keeps the widest radius above, as skirts do."""
+    from garsim.bodies.anny import AnnyBody
+    from garsim.garments.templates import make_garment
+    from garsim.geometry.mesh import edge_lengths
+    from garsim.physics.newton_sim import check_result, settle
+
+    phenotype = {"gender": 0.206, "age": 0.6641, "muscle": 0.9879, "weight": 0.8875, "height": 0.3327}
+    body = AnnyBody({**phenotype, "proportions": 0.1849})
+    params = {"length": 0.4231, "looseness": 0.0275, "sleeve_length": 0.1504, "sleeve_looseness": 0.0269}
+    params |= {"neck_width": 0.1047, "armpit_clearance": 0.041}
+    g = make_garment("tshirt", body, params, target_vertices=332)
+    g.pinned &= g.vertices[:, 2] >= g.vertices[g.pinned, 2].max() - gen.SHOULDER_PIN_BAND
+    canonical = body.canonical()
+    state, info = settle(g, canonical.vertices, body.faces, "cotton")
+    assert info["settled"]
+    check_result(state, g.faces, edge_lengths(g.vertices, g.faces), canonical.vertices, body.faces, pinned=g.pinned)
+
+
 @pytest.mark.slow
 def test_real_jobs_tshirt_and_trousers_pass_the_physics_checks(tmp_path):
     """A coarse t-shirt and a pair of trousers in everyday poses settle and pass every check (one target each)."""

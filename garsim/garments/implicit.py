@@ -38,7 +38,15 @@ from scipy.spatial import ConvexHull, cKDTree
 
 from garsim.garments.garment import Garment
 from garsim.geometry.inside import InsideTester
-from garsim.geometry.mesh import border_loops, face_areas, face_normals, vertex_normals
+from garsim.geometry.mesh import (
+    border_loops,
+    boundary_edges,
+    edge_lengths,
+    face_areas,
+    face_normals,
+    unique_edges,
+    vertex_normals,
+)
 
 IMPLICIT_KINDS: tuple[str, ...] = ("skirt", "top", "tshirt", "longsleeve", "trousers", "dress")
 
@@ -94,6 +102,8 @@ _DESCRIBE = {
     "neck": "0 = high neckline, 1 = deep",
 }
 
+SHORT_EDGE = 0.35
+"""Edges shorter than this fraction of the median edge after remeshing are collapsed (cut slivers)."""
 MIN_CLEARANCE = 0.005  # vertices closer to the body than this (m) are pushed out to it
 _MIN_TARGET, _MAX_TARGET = 100, 20000
 
@@ -730,6 +740,84 @@ def _remesh(v: np.ndarray, f: np.ndarray, target: int, h: float) -> tuple[np.nda
     return np.asarray(m.vertex_matrix(), dtype=np.float64), np.asarray(m.face_matrix(), dtype=np.int64)
 
 
+def _collapse_short_edges(
+    v: np.ndarray, f: np.ndarray, min_length: float, rounds: int = 8
+) -> tuple[np.ndarray, np.ndarray]:
+    """Collapse edges shorter than ``min_length`` (slivers the plane cuts leave along the border loops).
+
+    The remesher keeps border vertices where the cuts put them, so a cut passing close to a marching-cubes
+    vertex leaves border edges of ~0.01-1 mm beside 3-6 cm ones. The simulation's stretch test is relative
+    (an edge over 1.5x its rest length), and such an edge doubles as soon as its two vertices move apart
+    by a millimetre: the one that rejected implicit dresses, tops and long sleeves in every fabric alike.
+    Each round collapses a set of short edges whose 1-rings do not touch (shortest first), keeping
+    the mesh manifold (link condition; no interior edge between two border vertices) and no face
+    flipped; a border vertex keeps its place, two alike meet halfway.
+    """
+    for _ in range(rounds):
+        e = unique_edges(f)
+        length = np.linalg.norm(v[e[:, 1]] - v[e[:, 0]], axis=1)
+        cand = np.flatnonzero(length < min_length)
+        if len(cand) == 0:
+            break
+        n = len(v)
+        adj = coo_matrix((np.ones(2 * len(e)), (e.ravel(), e[:, ::-1].ravel())), shape=(n, n)).tocsr()
+        border_e = boundary_edges(f)
+        border = np.zeros(n, dtype=bool)
+        border[border_e.ravel()] = True
+        is_border_edge = np.isin(e[:, 0] * n + e[:, 1], border_e[:, 0] * n + border_e[:, 1])
+        a, b = e[cand, 0], e[cand, 1]
+        common = np.asarray(adj[a].multiply(adj[b]).sum(axis=1)).ravel()
+        ok = (common == np.where(is_border_edge[cand], 1, 2)) & ~(border[a] & border[b] & ~is_border_edge[cand])
+        cand = cand[ok][np.argsort(length[cand[ok]])]
+        taken = np.zeros(n, dtype=bool)
+        chosen = []
+        for k in cand:  # greedy independent set over the (few) short edges
+            ring = np.concatenate([adj.indices[adj.indptr[x] : adj.indptr[x + 1]] for x in e[k]])
+            if taken[e[k]].any() or taken[ring].any():
+                continue
+            taken[ring] = True
+            taken[e[k]] = True
+            chosen.append(k)
+        if not chosen:
+            break
+        chosen = np.asarray(chosen)
+        for _retry in range(2):
+            a, b = e[chosen, 0], e[chosen, 1]
+            pos = np.where(
+                (border[a] & ~border[b])[:, None],
+                v[a],
+                np.where((border[b] & ~border[a])[:, None], v[b], 0.5 * (v[a] + v[b])),
+            )
+            nv = v.copy()
+            nv[a] = pos
+            remap = np.arange(n)
+            remap[b] = a
+            nf = remap[f]
+            keep = (nf[:, 0] != nf[:, 1]) & (nf[:, 1] != nf[:, 2]) & (nf[:, 2] != nf[:, 0])
+            moved = np.zeros(n, dtype=bool)
+            moved[a] = True
+            touched = keep & moved[nf].any(axis=1)
+            before = face_normals(v, f[touched], normalize=False)
+            after = face_normals(nv, nf[touched], normalize=False)
+            flipped = np.einsum("ij,ij->i", before, after) <= 0.0
+            if not flipped.any():
+                break
+            bad = np.isin(a, nf[touched][flipped].ravel())
+            chosen = chosen[~bad]
+            if len(chosen) == 0:
+                break
+        else:
+            break
+        if len(chosen) == 0:
+            break
+        f = nf[keep]
+        used = np.unique(f)
+        back = np.full(n, -1, dtype=np.int64)
+        back[used] = np.arange(len(used))
+        v, f = nv[used], back[f]
+    return v, f
+
+
 def _fix_orientation(b: _Body, v: np.ndarray, f: np.ndarray) -> np.ndarray:
     """Flip all faces when normals point towards the body on average."""
     _, idx = b.tree.query(v)
@@ -803,6 +891,7 @@ def make_implicit_garment(
     v, f = _largest_component(v, f)
     v, f = _remesh(v, f, target, h)
     v, f = _largest_component(v, f)
+    v, f = _collapse_short_edges(v, f, SHORT_EDGE * float(np.median(edge_lengths(v, f))))
     f = _fix_orientation(b, v, f)
     v = _push_out(b, v)
     pinned = shape.pin(v)

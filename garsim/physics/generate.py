@@ -53,7 +53,9 @@ TEMPLATE_FAMILIES: tuple[str, ...] = ("skirt", "top", "tshirt", "trousers", "dre
 ARMHOLE_FAMILIES: frozenset[str] = frozenset({"top", "tshirt", "longsleeve", "dress"})
 """Families with armholes or sleeves: arms more than ~50 deg below or ~25 deg above their canonical position
 trap the cloth between arm and torso (edges stretched ~2x in every fabric alike), so their poses keep the
-arms in that range."""
+arms in that range (``ARM_BELOW_CANONICAL``, ``ARM_ABOVE_CANONICAL``)."""
+ARM_BELOW_CANONICAL = 50.0
+ARM_ABOVE_CANONICAL = 25.0
 CONSTRUCTIONS: tuple[str, ...] = ("template", "implicit")
 WAIST_FAMILIES: frozenset[str] = frozenset({"skirt", "trousers"})
 SHOULDER_PIN_BAND = 0.04
@@ -250,6 +252,21 @@ def _arm_pose(arm: float) -> dict[str, np.ndarray]:
     return {"upperarm01.L": np.array([0.0, -a, 0.0]), "upperarm01.R": np.array([0.0, a, 0.0])}
 
 
+def armhole_elevation_range(canonical_arm: float) -> tuple[float, float]:
+    """Everyday shoulder elevation range (degrees, the pose sampler's: 0 = T-pose, -40 = A-pose) of a garment
+    with armholes or sleeves cut for arms ``canonical_arm`` degrees above the A-pose: within
+    ``ARM_BELOW_CANONICAL`` below and ``ARM_ABOVE_CANONICAL`` above the canonical arms.
+
+    (The sampler measures elevation from the T-pose, ``canonical_arm`` from the A-pose: mixing the two let
+    A-pose garments see arms raised 65 deg above their canonical position and kept T-pose ones near the T.)
+    """
+    from garsim.bodies.poses import EVERYDAY_LIMITS
+
+    lo, hi = EVERYDAY_LIMITS.shoulder_elevation
+    canonical = canonical_arm - T_POSE_ARM  # the canonical arms in the sampler's angle
+    return max(lo, canonical - ARM_BELOW_CANONICAL), min(hi, canonical + ARM_ABOVE_CANONICAL)
+
+
 def target_poses(job: JobSpec, body: Any) -> list[dict[str, np.ndarray]]:
     """The job's chain of target poses (bone -> axis-angle), drawn from its pose seed."""
     from dataclasses import replace
@@ -258,11 +275,8 @@ def target_poses(job: JobSpec, body: Any) -> list[dict[str, np.ndarray]]:
 
     rng = np.random.default_rng(job.pose_seed)
     everyday = EVERYDAY_LIMITS
-    if job.family in ARMHOLE_FAMILIES:  # armholes cut for the canonical arms survive arms within ~-50..+25 deg
-        lo, hi = everyday.shoulder_elevation
-        everyday = replace(
-            everyday, shoulder_elevation=(max(lo, job.canonical_arm - 50.0), min(hi, job.canonical_arm + 25.0))
-        )
+    if job.family in ARMHOLE_FAMILIES:
+        everyday = replace(everyday, shoulder_elevation=armhole_elevation_range(job.canonical_arm))
     poses = []
     for mode in job.pose_modes:
         seed = int(rng.integers(2**31))

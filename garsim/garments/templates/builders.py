@@ -48,16 +48,6 @@ class _SkirtRadius:
         return r + self.loose + self.flare * np.maximum(0.0, self.z_hip - zs)[:, None]
 
 
-class _BodyRadius:
-    """r = body radius + looseness (vertically smoothed by a running max)."""
-
-    def __init__(self, loose: float, minimum: float = 0.0) -> None:
-        self.loose, self.minimum = loose, minimum
-
-    def __call__(self, zs: np.ndarray, centers: np.ndarray, rb: np.ndarray) -> np.ndarray:
-        return np.maximum(_smooth_rows(rb) + self.loose, self.minimum)
-
-
 def _build_skirt(body: TemplateBody, p: SkirtParams, h: float) -> tuple[_Mesh, np.ndarray]:
     z_top = body.z_waist + p.waist_height
     z_bot = z_top - p.length
@@ -192,7 +182,8 @@ def _build_top(body: TemplateBody, p: TopParams, h: float) -> tuple[_Mesh, np.nd
     mesh = _Mesh()
     xs = 0.5 * (body.neck_halfwidth + body.shoulder_x)
     x_in, x_out = xs - p.strap_width / 2, xs + p.strap_width / 2
-    rings, _, _ = _strapped_torso(body, mesh, h, z_top, z_bot, x_in, x_out, _BodyRadius(p.looseness), p.looseness)
+    radius = _SkirtRadius(body.z_hip, p.looseness, 0.0, body.z_waist)  # no narrowing below the waist
+    rings, _, _ = _strapped_torso(body, mesh, h, z_top, z_bot, x_in, x_out, radius, p.looseness)
     return mesh, _band_pins(mesh.n, rings[0])
 
 
@@ -214,9 +205,11 @@ def _build_tshirt(body: TemplateBody, p: TShirtParams, h: float) -> tuple[_Mesh,
     mesh = _Mesh()
     x_in = p.neck_width
     x_out = max(x_in + 0.03, body.shoulder_x - 0.02)
-    rings, panels, info = _strapped_torso(
-        body, mesh, h, z_top, z_bot, x_in, x_out, _BodyRadius(p.looseness), p.looseness
-    )
+    # Below the waist the torso keeps the running maximum of the body's radius (as skirts and dresses do): a
+    # tube that followed the body's waist-hip-thigh profile (into the gap between the legs) had to stretch
+    # over the hips and thighs as soon as it slid a centimetre under its own weight (1.5x hem edges at settle).
+    radius = _SkirtRadius(body.z_hip, p.looseness, 0.0, body.z_waist)
+    rings, panels, info = _strapped_torso(body, mesh, h, z_top, z_bot, x_in, x_out, radius, p.looseness)
     top = rings[0]
     V, _ = mesh.arrays()
     for side in ("L", "R"):
