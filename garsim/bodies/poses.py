@@ -82,6 +82,11 @@ class JointLimits:
                 )
 
 
+ARMS_DOWN = -60.0
+"""Shoulder elevation (degrees below the T-pose) of the motion library's arms-down poses (walk, standing). Lower
+arms overlap the torso: on the default Anny body, 5.6% of the upper arm's surface (offset 4 mm outwards) is inside
+the body at -75 and 3.0% at -70 (1.3% at -60, none at -55), a self-intersection that leaves a sleeve no room."""
+
 EVERYDAY_LIMITS = JointLimits(
     hip_flexion=(-10.0, 40.0),
     hip_abduction=(-5.0, 12.0),
@@ -449,11 +454,14 @@ LEG_LENGTH = 0.85
 """Hip-to-floor length (m) used to turn a stride into a hip swing amplitude."""
 
 
-def walk_pose(phase: float | np.ndarray, stride: float = 0.6, axes: HingeAxes | None = None) -> dict[str, np.ndarray]:
+def walk_pose(
+    phase: float | np.ndarray, stride: float = 0.6, axes: HingeAxes | None = None, arm_elevation: float = ARMS_DOWN
+) -> dict[str, np.ndarray]:
     """Walk pose(s) at ``phase`` (radians, period 2 pi): legs swing in counter-phase, arms opposite the legs.
 
     ``stride`` is the distance (m) between the feet at full step; the hip swing amplitude is
-    ``asin(stride / (2 * LEG_LENGTH))``. Returns (n, 3) axis-angles per bone for n phases.
+    ``asin(stride / (2 * LEG_LENGTH))``; ``arm_elevation`` (degrees from the T-pose) lowers the arms.
+    Returns (n, 3) axis-angles per bone for n phases.
     """
     if not (0.0 < stride < 2 * LEG_LENGTH):
         raise ValueError(f"stride must be in (0, {2 * LEG_LENGTH}) metres, got {stride}")
@@ -470,8 +478,8 @@ def walk_pose(phase: float | np.ndarray, stride: float = 0.6, axes: HingeAxes | 
         "hip_abduction_L": np.full_like(phi, 3.0),
         "hip_abduction_R": np.full_like(phi, 3.0),
         # Arms down by the sides, swinging opposite to the leg of the same side.
-        "shoulder_elevation_L": np.full_like(phi, -75.0),
-        "shoulder_elevation_R": np.full_like(phi, -75.0),
+        "shoulder_elevation_L": np.full_like(phi, arm_elevation),
+        "shoulder_elevation_R": np.full_like(phi, arm_elevation),
         "elbow_flexion_L": 10.0 + 10.0 * np.clip(-s, 0.0, None),
         "elbow_flexion_R": 10.0 + 10.0 * np.clip(s, 0.0, None),
         "spine_twist": -0.4 * amp * s,
@@ -514,7 +522,7 @@ def _pose(angles: Mapping[str, float]) -> dict[str, np.ndarray]:
     return unbatch(angles_to_pose(angles), 0)
 
 
-STANDING: dict[str, np.ndarray] = _pose({"shoulder_elevation_L": -70.0, "shoulder_elevation_R": -70.0})
+STANDING: dict[str, np.ndarray] = _pose({"shoulder_elevation_L": ARMS_DOWN, "shoulder_elevation_R": ARMS_DOWN})
 """Standing with the arms down at the sides (the everyday rest pose the motions start from)."""
 
 
@@ -539,10 +547,11 @@ def motion(name: str, num_frames: int = 30) -> list[dict[str, np.ndarray]]:
         )
     if name == "turn":
         left = _towards(
-            _pose({"shoulder_elevation_L": -70.0, "shoulder_elevation_R": -70.0, "spine_twist": 25.0}), num_frames // 2
+            _pose({"shoulder_elevation_L": ARMS_DOWN, "shoulder_elevation_R": ARMS_DOWN, "spine_twist": 25.0}),
+            num_frames // 2,
         )
         right = _towards(
-            _pose({"shoulder_elevation_L": -70.0, "shoulder_elevation_R": -70.0, "spine_twist": -25.0}),
+            _pose({"shoulder_elevation_L": ARMS_DOWN, "shoulder_elevation_R": ARMS_DOWN, "spine_twist": -25.0}),
             num_frames - len(left),
         )
         return left + right
@@ -550,8 +559,8 @@ def motion(name: str, num_frames: int = 30) -> list[dict[str, np.ndarray]]:
         return _towards(
             _pose(
                 {
-                    "shoulder_elevation_L": -70.0,
-                    "shoulder_elevation_R": -70.0,
+                    "shoulder_elevation_L": ARMS_DOWN,
+                    "shoulder_elevation_R": ARMS_DOWN,
                     "hip_flexion_L": 80.0,
                     "hip_flexion_R": 80.0,
                     "knee_flexion_L": 85.0,
