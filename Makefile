@@ -39,6 +39,6 @@ results: $(STAMP)
 	if [ -f $(EXTERNAL) ]; then \
 	  $(VENV)/bin/python $(EXTERNAL) --model $(MODEL) --json docs/external_default.json && \
 	  $(VENV)/bin/python examples/external_check.py --model $(MODEL) --raw --json docs/external_raw.json; fi
-	$(VENV)/bin/garsim bench --model $(MODEL) --out docs/bench.json
-	$(VENV)/bin/python examples/make_report.py --run $(wildcard $(RUN)) --model $(MODEL) --data $(DATA) \
+	$(VENV)/bin/garsim bench --model $(MODEL) --sizes 600 2400 10000 40000 --out docs/bench.json
+	$(VENV)/bin/python examples/make_report.py --run $(patsubst %/log.csv,%,$(wildcard $(RUN)/log.csv)) --model $(MODEL) --data $(DATA) \
 	  --results docs/results.json --external $(wildcard docs/external_default.json docs/external_raw.json)
