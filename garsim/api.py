@@ -484,7 +484,10 @@ class GarSim:
         ``smoothing`` (frames, >= 0; 0 turns it off): the network's correction to the prior, G - G^prior, is
         smoothed over time with a Gaussian of this standard deviation before the post-process of each frame (the
         prior carries the motion, so only the network's frame-to-frame noise is removed; the whole sequence is
-        known, so the filter is centred and adds no lag). The bare prior is never smoothed.
+        known, so the filter is centred and adds no lag). With the refinement on, the refined frames' correction is
+        smoothed once more and refined again (a near-valid drape, so the second pass is cheap and moves little): the
+        refinement's own frame-to-frame changes would otherwise add the jitter the first filter removed. The bare
+        prior is never smoothed.
 
         ``body_targets`` is a sequence of meshes (or vertex arrays sharing the canonical body's faces) or a
         (T, Vb, 3) array. Per-garment and per-body work is done once per sequence: validating the canonical body and
@@ -507,8 +510,12 @@ class GarSim:
                 bar.update()
             if sigma > 0 and len(raw) > 1:
                 raw = list(smooth_corrections(np.stack(raw), np.stack([s.prior for s in samples]), sigma))
-            frames = []
+            done = []
             for sample, pred in zip(samples, raw):
-                frames.append(from_internal(self.finish(pred, sample), up, units).astype(np.float32))
+                done.append(self.finish(pred, sample))
                 bar.update()
-        return np.stack(frames)
+            refined = self.model is not None and self.refine and self.collision_margin is not None
+            if sigma > 0 and len(done) > 1 and refined:  # the refinement's own frame-to-frame changes, smoothed
+                again = smooth_corrections(np.stack(done), np.stack([s.prior for s in samples]), sigma)
+                done = [self.finish(pred, sample) for sample, pred in zip(samples, again)]
+        return np.stack([from_internal(f, up, units).astype(np.float32) for f in done])
