@@ -20,6 +20,7 @@ from __future__ import annotations
 import itertools
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 import scipy.sparse as sp
@@ -29,6 +30,10 @@ from garsim.geometry.cache import ContentCache, content_key
 from garsim.model.config import GarSimConfig
 from garsim.model.inputs import graph_arrays
 from garsim.model.weights import CONFIG_FILE, DEFAULT_KIND, WEIGHTS_FILE, WeightsError, load_verified, read_model_config
+
+if TYPE_CHECKING:  # torch: only for the annotation
+    from garsim.model.garsim import GraphModel
+
 
 _STATIC = ContentCache(8, scope="garment")  # per (model, template garment, canonical body): pose-free features
 _TOKENS = itertools.count()
@@ -246,7 +251,7 @@ class GarSimRuntime:
         return [self.predict(s) for s in sample]  # type: ignore[misc]
 
 
-def load_for_inference(directory: str | Path) -> GarSimRuntime | object:
+def load_for_inference(directory: str | Path) -> GarSimRuntime | GraphModel:
     """The model saved in ``directory`` for draping: the numpy runtime when it implements the model (GarSim with
     the mean aggregation), else the torch model (``garsim.model.baselines.load_model``: the DeePSD-style
     baseline, other aggregations). Both have ``predict(sample)`` and ``config``."""
