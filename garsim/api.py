@@ -192,10 +192,11 @@ class Scene:
     def target_vertices(self, body_target: Any) -> np.ndarray:
         """A target body (a mesh, or an array of vertices on the canonical body's faces) in garsim's frame; it must
         share the canonical body's topology."""
-        if isinstance(body_target, np.ndarray) and body_target.shape == self.body_canonical.shape:
-            if not np.isfinite(body_target).all():
+        verts = self._on_canonical_faces(body_target)
+        if verts is not None:  # the canonical body's (validated) faces: only the vertices need checking
+            if not np.isfinite(verts).all():
                 raise MeshError("target body: vertices contain NaN or inf; fix the mesh")
-            bt, bf_t = body_target, self.body_faces
+            bt, bf_t = verts, self.body_faces
         else:
             bt, bf_t = as_mesh(body_target, "target body")
         bt = to_internal(bt, self.up, self.units).astype(np.float32)
@@ -206,6 +207,22 @@ class Scene:
                 f"{len(bf_t)} faces) must share one topology: pose the same body mesh"
             )
         return bt
+
+    def _on_canonical_faces(self, body_target: Any) -> np.ndarray | None:
+        """The vertices of a target given as an array, or as a (vertices, faces) pair whose faces are the canonical
+        body's, when they are numbers of the canonical body's shape; else None (validate it as a mesh)."""
+        verts = body_target
+        if isinstance(body_target, (tuple, list)) and len(body_target) == 2:
+            faces = body_target[1]
+            same = faces is self.body_faces or (
+                isinstance(faces, np.ndarray)
+                and faces.shape == self.body_faces.shape
+                and np.array_equal(faces, self.body_faces)
+            )
+            verts = body_target[0] if same else None
+        if not isinstance(verts, np.ndarray) or verts.shape != self.body_canonical.shape:
+            return None
+        return verts if np.issubdtype(verts.dtype, np.number) else None
 
     def sample(self, body_target: Any) -> Sample:
         """The model's input record for one target body (validated here), with the prior."""
