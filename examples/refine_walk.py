@@ -31,7 +31,7 @@ from garsim.bodies.poses import batched_matrices, motion, stack_poses
 from garsim.demo import DEMO_GARMENTS, _build_garment
 from garsim.eval.metrics import jitter_mm
 from garsim.geometry.inside import InsideTester
-from garsim.geometry.mesh import unique_edges
+from garsim.geometry.mesh import edge_lengths, unique_edges
 from garsim.refine import refine
 
 MIN_REST = 0.005  # m: shorter (seam) edges are left out of the stretch figures, as the issue asks
@@ -40,8 +40,7 @@ MIN_REST = 0.005  # m: shorter (seam) edges are left out of the stretch figures,
 def frame_figures(frames: np.ndarray, garment, targets: np.ndarray, faces: np.ndarray) -> dict[str, float]:
     """Stretch, inside and edge-crossing figures of (T, N, 3) drapes on their (T, Vb, 3) target bodies."""
     e = unique_edges(garment.faces)
-    tpl = np.asarray(garment.vertices, np.float64)
-    rest = np.linalg.norm(tpl[e[:, 1]] - tpl[e[:, 0]], axis=1)
+    rest = edge_lengths(garment.vertices, garment.faces)
     counted = (rest >= MIN_REST) & ~(garment.pinned[e[:, 0]] & garment.pinned[e[:, 1]])
     free_edges = ~(garment.pinned[e[:, 0]] | garment.pinned[e[:, 1]])
     ratios, inside, through = [], [], []

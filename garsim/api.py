@@ -525,14 +525,15 @@ class GarSim:
                 samples.append(scene.sample(t))
                 raw.append(self.raw(samples[-1]))
                 bar.update()
+            priors = np.stack([s.prior for s in samples])
             if sigma > 0 and len(raw) > 1:
-                raw = list(smooth_corrections(np.stack(raw), np.stack([s.prior for s in samples]), sigma))
+                raw = list(smooth_corrections(np.stack(raw), priors, sigma))
             done = []
             for sample, pred in zip(samples, raw):
                 done.append(self.finish(pred, sample))
                 bar.update()
             refined = self.model is not None and self.refine and self.collision_margin is not None
             if sigma > 0 and len(done) > 1 and refined:  # the refinement's own frame-to-frame changes, smoothed
-                again = smooth_corrections(np.stack(done), np.stack([s.prior for s in samples]), sigma)
+                again = smooth_corrections(np.stack(done), priors, sigma)
                 done = [self.finish(pred, sample) for sample, pred in zip(samples, again)]
         return np.stack([from_internal(f, up, units).astype(np.float32) for f in done])

@@ -227,7 +227,7 @@ def cmd_drape(args: argparse.Namespace) -> int:
                 raise ValueError(f"--out {o} would overwrite the input {flag} {given}; write elsewhere")
     import numpy as np
 
-    from garsim.api import GarSim, from_internal, make_sample, to_internal
+    from garsim.api import GarSim, Scene, from_internal
     from garsim.geometry.io import MeshError, load_mesh, load_mesh_with_attributes, save_mesh
 
     canonical = load_mesh(args.canonical)
@@ -244,18 +244,16 @@ def cmd_drape(args: argparse.Namespace) -> int:
         bodies.append(body)
     pinned = "auto" if args.pinned == "auto" else _read_pinned(args.pinned) if args.pinned else None
 
-    def sample(body: tuple) -> object:
-        return make_sample(canonical, body, garment, args.fabric, pinned, up=args.up, units=args.units)
-
-    first = sample(bodies[0])  # bad meshes are refused before the model (and torch) loads
+    scene = Scene.make(canonical, garment, args.fabric, pinned, up=args.up, units=args.units)  # once for all targets
+    samples = [scene.sample(body) for body in bodies]  # bad meshes are refused before the model loads
     sim = GarSim.prior_only() if args.prior_only else GarSim.pretrained()
-    for k, (body, path, png_path) in enumerate(zip(bodies, outs, pngs)):
-        verts = from_internal(sim.predict(first if k == 0 else sample(body)), args.up, args.units).astype(np.float32)
+    for sample, path, png_path in zip(samples, outs, pngs):
+        pred = sim.predict(sample)
+        verts = from_internal(pred, args.up, args.units).astype(np.float32)
         if png_path is not None:  # the render is the likelier of the two writes to fail: before the mesh
             from garsim.geometry.render import render_views
 
-            shown = (to_internal(body[0], args.up, args.units), body[1])
-            render_views(png_path, [shown, (to_internal(verts, args.up, args.units), gf)])
+            render_views(png_path, [(sample.body_target, sample.body_faces), (pred, gf)])
         # --y-up rotates a Z-up result for Blender/glTF; with --up y the result is already in the input's Y-up axis
         attrs = None if attributes.empty else attributes.recompute_normals(verts, gf)
         save_mesh(path, verts, gf, y_up=args.y_up and args.up == "z", attributes=attrs)

@@ -69,6 +69,7 @@ from garsim.garments.fabrics import Fabric, get_fabric
 from garsim.geometry.cache import ContentCache, content_key
 from garsim.geometry.inside import UNBOUNDED, Obstacle, obstacle, quiet_warp, surface_funcs
 from garsim.geometry.mesh import unique_edges
+from garsim.geometry.proximity import smoothstep
 
 DEFAULT_STRETCH = 1.10
 """Default edge-length limit (x rest length) for preset-like fabrics (membrane stiffness >= 3e3 N/m)."""
@@ -552,7 +553,7 @@ class _State:
         if not w.any():
             return None
         use = np.flatnonzero(w)
-        w[use] *= _smoothstep((self.obs.query(prior[use])[0] + FALLBACK_DEPTH) / FALLBACK_RAMP)
+        w[use] *= smoothstep((self.obs.query(prior[use])[0] + FALLBACK_DEPTH) / FALLBACK_RAMP)
         x = self.buf["x"].numpy()
         x += w[:, None] * (prior - x)
         self.buf["previous"].numpy()[:] = x
@@ -573,17 +574,12 @@ class _State:
         return self.buf["x"].numpy()
 
 
-def _smoothstep(t: np.ndarray) -> np.ndarray:
-    t = np.clip(t, 0.0, 1.0)
-    return t * t * (3.0 - 2.0 * t)
-
-
 def fallback_weight(d: np.ndarray, edges: np.ndarray, closed_inv_degree: np.ndarray) -> np.ndarray:
     """Weight (N,) in [0, 1] of the fallback at each vertex from its signed distance ``d`` (N,) to the obstacle:
     0 above -``FALLBACK_DEPTH``, 1 below -(``FALLBACK_DEPTH`` + ``FALLBACK_RAMP``), a smoothstep between; then
     ``FALLBACK_PASSES`` times w = max(w, mean of w over the vertex and its neighbours along ``edges``), so that a
     patch moves as a whole and its border fades over a few rings. Continuous in ``d``; 0 where nothing is deep."""
-    w = _smoothstep((-np.asarray(d, np.float64) - FALLBACK_DEPTH) / FALLBACK_RAMP)
+    w = smoothstep((-np.asarray(d, np.float64) - FALLBACK_DEPTH) / FALLBACK_RAMP)
     if not w.any() or len(edges) == 0:
         return w
     n = len(w)

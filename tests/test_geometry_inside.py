@@ -112,3 +112,7 @@ def test_exact_obstacle_is_shared_and_agrees_with_the_tester(icosphere):
     assert np.abs(close - c32).max() < 1e-5
     assert np.array_equal(sd < 0, tester.inside(p))
     assert np.allclose(np.linalg.norm(normal, axis=1), 1.0)
+    away = np.abs(sd) > 1e-4  # off the surface the normal is the signed direction from the closest point
+    expected = np.sign(sd[away])[:, None] * (p[away] - close[away]) / np.abs(sd[away])[:, None]
+    assert np.allclose(normal[away], expected, atol=1e-9)
+    assert (np.einsum("ij,ij->i", normal, close) > 0).all()  # a sphere about the origin: normals point outwards

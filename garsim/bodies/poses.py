@@ -454,13 +454,11 @@ LEG_LENGTH = 0.85
 """Hip-to-floor length (m) used to turn a stride into a hip swing amplitude."""
 
 
-def walk_pose(
-    phase: float | np.ndarray, stride: float = 0.6, axes: HingeAxes | None = None, arm_elevation: float = ARMS_DOWN
-) -> dict[str, np.ndarray]:
+def walk_pose(phase: float | np.ndarray, stride: float = 0.6, axes: HingeAxes | None = None) -> dict[str, np.ndarray]:
     """Walk pose(s) at ``phase`` (radians, period 2 pi): legs swing in counter-phase, arms opposite the legs.
 
     ``stride`` is the distance (m) between the feet at full step; the hip swing amplitude is
-    ``asin(stride / (2 * LEG_LENGTH))``; ``arm_elevation`` (degrees from the T-pose) lowers the arms.
+    ``asin(stride / (2 * LEG_LENGTH))``; the arms hang at ``ARMS_DOWN``.
     Returns (n, 3) axis-angles per bone for n phases.
     """
     if not (0.0 < stride < 2 * LEG_LENGTH):
@@ -478,8 +476,8 @@ def walk_pose(
         "hip_abduction_L": np.full_like(phi, 3.0),
         "hip_abduction_R": np.full_like(phi, 3.0),
         # Arms down by the sides, swinging opposite to the leg of the same side.
-        "shoulder_elevation_L": np.full_like(phi, arm_elevation),
-        "shoulder_elevation_R": np.full_like(phi, arm_elevation),
+        "shoulder_elevation_L": np.full_like(phi, ARMS_DOWN),
+        "shoulder_elevation_R": np.full_like(phi, ARMS_DOWN),
         "elbow_flexion_L": 10.0 + 10.0 * np.clip(-s, 0.0, None),
         "elbow_flexion_R": 10.0 + 10.0 * np.clip(s, 0.0, None),
         "spine_twist": -0.4 * amp * s,

@@ -47,6 +47,7 @@ from garsim.geometry.mesh import (
     unique_edges,
     vertex_normals,
 )
+from garsim.geometry.proximity import smoothstep
 
 IMPLICIT_KINDS: tuple[str, ...] = ("skirt", "top", "tshirt", "longsleeve", "trousers", "dress")
 
@@ -383,11 +384,6 @@ def _cumulative_hull_field(
     return out
 
 
-def _smoothstep(x: np.ndarray) -> np.ndarray:
-    t = np.clip(x, 0.0, 1.0)
-    return t * t * (3.0 - 2.0 * t)
-
-
 # ---------------------------------------------------------------------------------------------
 # garment shapes: a field over a box and a keep function
 
@@ -594,7 +590,7 @@ def _shape_trousers(b: _Body, p: dict) -> _Shape:
             F_leg = (1 - width) * F_body + width * np.clip(H, -4 * h, 4 * h) if width > 0 else F_body
             legs_f.append(np.maximum(F_leg, gap - s * X))
         F_legs = np.minimum(*legs_f)
-        s_z = _smoothstep((z_split + 0.03 - zs) / 0.05)[None, None, :]
+        s_z = smoothstep((z_split + 0.03 - zs) / 0.05)[None, None, :]
         return (1 - s_z) * F_body + s_z * F_legs
 
     def post(F, xs, ys, zs, h):  # the slot between the legs, after smoothing so that it stays open
@@ -636,7 +632,7 @@ def _shape_dress(b: _Body, p: dict) -> _Shape:
         F[:, :, ~dn] = F_up[:, :, ~dn[up]]
         F[:, :, ~up] = F_dn[:, :, ~up[dn]]
         both = up & dn
-        s = _smoothstep((z_j + 0.06 - zs[both]) / 0.14)[None, None, :]
+        s = smoothstep((z_j + 0.06 - zs[both]) / 0.14)[None, None, :]
         F[:, :, both] = (1 - s) * F_up[:, :, both[up]] + s * F_dn[:, :, both[dn]]
         return F
 

@@ -42,6 +42,7 @@ import numpy as np
 
 from garsim.atomic import atomic_write_bytes
 from garsim.geometry.cache import ContentCache, content_key
+from garsim.geometry.mesh import face_areas
 
 log = logging.getLogger(__name__)
 
@@ -97,8 +98,7 @@ def _as_array(x: Any, name: str, what: str) -> np.ndarray:
 def zero_area_faces(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
     """(F,) mask of the faces whose area is below ``DEGENERATE_AREA_RTOL`` x the squared bounding-box diagonal."""
     v = np.asarray(vertices, np.float64)
-    f = np.asarray(faces, np.int64)
-    area2 = np.linalg.norm(np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]]), axis=1)
+    area2 = 2.0 * face_areas(v, np.asarray(faces, np.int64))
     diag2 = float(np.sum((v.max(axis=0) - v.min(axis=0)) ** 2))
     return area2 <= 2.0 * DEGENERATE_AREA_RTOL * max(diag2, 1e-30)
 

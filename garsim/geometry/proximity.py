@@ -12,6 +12,12 @@ from garsim.geometry.cache import ContentCache, content_key
 _TREE_CACHE = ContentCache(8)
 
 
+def smoothstep(t: np.ndarray) -> np.ndarray:
+    """3t^2 - 2t^3 of ``t`` clipped to [0, 1]: a ramp from 0 to 1 with zero slope at both ends."""
+    t = np.clip(t, 0.0, 1.0)
+    return t * t * (3.0 - 2.0 * t)
+
+
 def cached_tree(points: np.ndarray, cache: ContentCache = _TREE_CACHE) -> cKDTree:
     """KD-tree over ``points``, cached by content (in ``cache``: training keeps its own, larger one), so a body
     reused across garments, frames or epochs is indexed once and an edited array never hits a stale tree."""
