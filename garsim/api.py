@@ -3,13 +3,14 @@
 from __future__ import annotations
 
 import dataclasses
+import functools
 import logging
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from garsim.bodies.prior import mesh_pair_prior
+from garsim.bodies.prior import MeshPairPrior
 from garsim.data.sample import CUSTOM_FABRIC, FABRICS, Sample
 from garsim.garments.fabrics import Fabric, fabric_from_values, get_fabric
 from garsim.garments.garment import Garment
@@ -224,6 +225,11 @@ class Scene:
             return None
         return verts if np.issubdtype(verts.dtype, np.number) else None
 
+    @functools.cached_property
+    def prior(self) -> MeshPairPrior:
+        """The skinning prior of this garment on this canonical body, set up once: ``prior(target)`` per pose."""
+        return MeshPairPrior(self.garment, self.body_canonical, self.body_faces)
+
     def sample(self, body_target: Any) -> Sample:
         """The model's input record for one target body (validated here), with the prior."""
         bt = self.target_vertices(body_target)
@@ -234,7 +240,7 @@ class Scene:
             garment=self.garment,
             garment_faces=self.garment_faces,
             pinned=self.pinned,
-            prior=mesh_pair_prior(self.garment, self.body_canonical, bt, self.body_faces),
+            prior=self.prior(bt),
             fabric=self.fabric,
             fabric_values=self.fabric_values,
             garment_type=self.garment_type,

@@ -177,3 +177,25 @@ def test_collision_normals_equal_full_vertex_normals(sample):
     sel = d2.argmin(axis=1)
     np.testing.assert_array_equal(col["col_normal"].numpy(), full[sel])  # bitwise: same faces, same order
     assert len(sel) > 50 and np.allclose(np.linalg.norm(col["col_normal"].numpy(), axis=1), 1.0, atol=1e-5)
+
+
+def test_pose_free_part_is_shared_and_read_only(sample):
+    """Two poses of one garment share one StaticGraph; graph_arrays is its arrays plus the pose's, fresh copies."""
+    import dataclasses
+
+    from garsim.model.inputs import graph_arrays, pose_arrays, static_graph
+
+    other = dataclasses.replace(sample, body_target=sample.body_target + 0.01, prior=sample.prior + 0.01)
+    static = static_graph(sample)
+    assert static_graph(other) is static  # the pose does not enter the key
+    assert not static.arrays["p"].flags.writeable  # shared by every pose: nobody may edit it
+    full = graph_arrays(other, loss_inputs=False)
+    assert full["p"].flags.writeable and not np.shares_memory(full["p"], static.arrays["p"])
+    pose = pose_arrays(static, other)
+    for key, value in {**static.arrays, **pose}.items():
+        np.testing.assert_array_equal(full[key], value, err_msg=key)
+    # moving the target and the prior by the same 1 cm moves only the anchor and the prior
+    base = graph_arrays(sample)
+    shift = np.full(3, 0.01) @ static.rot64.T  # the 1 cm world shift in the body frame
+    np.testing.assert_allclose(full["delta"] - base["delta"], np.broadcast_to(shift, base["delta"].shape), atol=1e-5)
+    np.testing.assert_allclose(full["p_prior"], base["p_prior"], atol=1e-5)

@@ -102,3 +102,21 @@ def test_drape_path_imports_neither_torch_nor_trimesh(tmp_path: Path) -> None:
     out = subprocess.run([sys.executable, "-c", code], cwd=tmp_path, capture_output=True, text=True, timeout=300)
     assert out.stdout.strip().splitlines()[-1] == "[] 0", out.stderr[-2000:]
     assert (tmp_path / "d.obj").exists()
+
+
+def test_runtime_reuses_pose_free_features_across_poses() -> None:
+    """A second pose of the same garment reuses the cached pose-free features and gives what a cold call gives."""
+    import dataclasses
+
+    from garsim.geometry.cache import clear_all
+
+    runtime = GarSimRuntime.load(WEIGHTS)
+    a = make_sample(fabric="cotton", pose_id=1)
+    b = dataclasses.replace(a, body_target=make_sample(fabric="cotton", pose_id=3).body_target)
+    b = dataclasses.replace(b, prior=make_sample(fabric="cotton", pose_id=3).prior)
+    runtime.predict(a)
+    warm = runtime.predict(b)
+    clear_all()
+    cold = runtime.predict(b)
+    np.testing.assert_array_equal(warm, cold)
+    assert np.abs(warm - runtime.predict(a)).max() > 1e-3  # the pose did change the output

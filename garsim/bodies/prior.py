@@ -88,6 +88,30 @@ def garment_prior(body: BodyModel, canonical: PosedBody, target: PosedBody, garm
     return apply_transforms(g, composite).astype(np.float32)
 
 
+class MeshPairPrior:
+    """:func:`mesh_pair_prior` of one garment on one canonical body, set up once (rig match, bone-fit system,
+    skinning weights); ``self(target)`` gives the prior on one target body: a pose sequence pays per frame only
+    for the bone fit and the skinning."""
+
+    def __init__(self, garment: np.ndarray, canonical: np.ndarray, faces: np.ndarray) -> None:
+        from garsim.bodies.anny_rig import match_anny_rig
+        from garsim.bodies.recover import RecoveredPrior
+
+        self.centre = np.asarray(canonical, dtype=np.float64).mean(axis=0)
+        self.garment, self.canonical = (np.asarray(a, dtype=np.float64) - self.centre for a in (garment, canonical))
+        self.faces = faces
+        rig = match_anny_rig(len(canonical), faces)
+        self.lbs = None if rig is None else RecoveredPrior(self.garment, self.canonical, *rig)
+
+    def __call__(self, target: np.ndarray) -> np.ndarray:
+        t = np.asarray(target, dtype=np.float64) - self.centre
+        if self.lbs is None:
+            out = rigfree_prior(self.garment, self.canonical, t, self.faces)
+        else:
+            out = self.lbs(t)
+        return (out.astype(np.float64) + self.centre).astype(np.float32)
+
+
 def mesh_pair_prior(garment: np.ndarray, canonical: np.ndarray, target: np.ndarray, faces: np.ndarray) -> np.ndarray:
     """The garment prior from two body meshes: Anny-topology bodies get the LBS prior with bone transforms
     recovered from the meshes (as in training); any other topology the rig-free prior.
@@ -95,15 +119,4 @@ def mesh_pair_prior(garment: np.ndarray, canonical: np.ndarray, target: np.ndarr
     Computed about the canonical body's centroid (float64), so moving the whole scene moves the prior with it
     exactly (the bone fit's damping pulls towards identity transforms, which is not translation invariant).
     """
-    from garsim.bodies.anny_rig import match_anny_rig
-    from garsim.bodies.recover import recovered_lbs_prior
-
-    centre = np.asarray(canonical, dtype=np.float64).mean(axis=0)
-    g, c, t = (np.asarray(a, dtype=np.float64) - centre for a in (garment, canonical, target))
-    rig = match_anny_rig(len(canonical), faces)
-    if rig is None:
-        out = rigfree_prior(g, c, t, faces)
-    else:
-        indices, weights, num_bones = rig
-        out = recovered_lbs_prior(g, c, t, indices, weights, num_bones)
-    return (out.astype(np.float64) + centre).astype(np.float32)
+    return MeshPairPrior(garment, canonical, faces)(target)

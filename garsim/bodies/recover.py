@@ -96,6 +96,31 @@ def fit_bone_transforms(
     return _FITS.get((key, content_key(target)), lambda: system.fit(target))
 
 
+class RecoveredPrior:
+    """The LBS prior of one garment on one canonical mesh of a rigged topology, set up once (the rig's factorised
+    system and the garment's transferred weights); ``self(target)`` fits the bones and skins the garment."""
+
+    def __init__(
+        self,
+        garment: np.ndarray,
+        canonical: np.ndarray,
+        skin_indices: np.ndarray,
+        skin_weights: np.ndarray,
+        num_bones: int,
+    ) -> None:
+        key = _rig_key(canonical, skin_indices, skin_weights, num_bones, DEFAULT_DAMPING)
+        self.system = _rig_system(key, canonical, skin_indices, skin_weights, num_bones, DEFAULT_DAMPING)
+        self.garment = np.asarray(garment, dtype=np.float64)
+        self.weights = transfer_weights(garment, canonical, self.system.dense)
+        self.num_vertices = len(canonical)
+
+    def __call__(self, target: np.ndarray) -> np.ndarray:
+        if np.shape(target) != (self.num_vertices, 3):
+            raise ValueError(f"target {np.shape(target)} must cover the canonical mesh's {self.num_vertices} vertices")
+        bones = self.system.fit(target)
+        return apply_transforms(self.garment, blended_transforms(self.weights, bones)).astype(np.float32)
+
+
 def recovered_lbs_prior(
     garment: np.ndarray,
     canonical: np.ndarray,
@@ -105,8 +130,4 @@ def recovered_lbs_prior(
     num_bones: int,
 ) -> np.ndarray:
     """The LBS prior from a canonical/target mesh pair of a rigged topology (no pose parameters)."""
-    bones = fit_bone_transforms(canonical, target, skin_indices, skin_weights, num_bones)
-    key = _rig_key(canonical, skin_indices, skin_weights, num_bones, DEFAULT_DAMPING)
-    dense = _rig_system(key, canonical, skin_indices, skin_weights, num_bones, DEFAULT_DAMPING).dense
-    w = transfer_weights(garment, canonical, dense)
-    return apply_transforms(np.asarray(garment, dtype=np.float64), blended_transforms(w, bones)).astype(np.float32)
+    return RecoveredPrior(garment, canonical, skin_indices, skin_weights, num_bones)(target)

@@ -23,6 +23,8 @@ Z and to translations. Full SO(3) equivariance is not wanted: gravity points dow
 
 from __future__ import annotations
 
+import itertools
+
 import numpy as np
 import scipy.sparse as sp
 
@@ -195,6 +197,103 @@ def fabric_features(sample: Sample) -> np.ndarray:
     )
 
 
+class StaticGraph:
+    """The pose-free part of one garment's graph on one canonical body (computed once per garment, body and input
+    configuration, cached by content): the arrays of :func:`graph_arrays` that do not depend on the target body or
+    the prior, and what the per-pose part needs. ``token`` is unique per instance: a key for what a model derives
+    from these arrays (its pose-free features)."""
+
+    _tokens = itertools.count()
+
+    def __init__(
+        self, g: np.ndarray, faces: np.ndarray, body_canonical: np.ndarray, body_faces: np.ndarray, cfg: GarSimConfig
+    ) -> None:
+        n = len(g)
+        body = body_frame(body_canonical, body_faces, cfg.canonicalize_yaw)
+        # soft anchor q_i: a continuous blend of the canonical body vertices near G_i
+        w = soft_anchor(g, body.vertices).tocoo()
+        used, slot = np.unique(w.col, return_inverse=True)
+        self.anchor_w = sp.csr_matrix((w.data, (w.row, slot)), shape=(n, len(used)))
+        self.used = used
+        self.rot64 = body.rot64
+        # every vector in the body frame, in float64 (then float32): rotate the points, then subtract
+        gf = g.astype(np.float64) @ self.rot64.T
+        self.bq = self.anchor_w @ body.framed64[used]
+        # body neighbourhoods (X^body): every anchoring body vertex with its mesh 1-ring, relative to it
+        nbr = body.ring(cfg.knn_body)[used]
+        gidx, ei = garment_topology(g, faces, cfg.knn_garment)
+        snd, rcv = ei[0], ei[1]
+        mass = np.zeros(len(used))
+        np.maximum.at(mass, slot, w.data)
+        self.edge_garment = (gf[rcv] - gf[snd]).astype(np.float32)
+        self.arrays = {
+            "pos": g.copy(),
+            "p": (gf - self.bq).astype(np.float32),
+            "gar_rel": (gf[gidx] - gf[:, None, :]).astype(np.float32),
+            "body_rel": (body.framed64[nbr] - body.framed64[used][:, None, :]).astype(np.float32),
+            "anchor_index": np.stack([w.row.astype(np.int64), slot.astype(np.int64)]),
+            "anchor_weight": w.data.astype(np.float32),
+            "edge_index": ei.copy(),
+            "faces": faces.copy(),
+            "sem": semantic_vector(body.framed, used, cfg, bounds=body.bounds, weights=mass)[None],
+            "rot": body.rot.copy()[None],
+        }
+        for a in self.arrays.values():
+            a.flags.writeable = False  # shared by every pose of this garment
+        self.token = next(self._tokens)
+
+    def pose(self, prior: np.ndarray, body_target: np.ndarray) -> dict[str, np.ndarray]:
+        """The arrays that depend on the target body and the prior (float32)."""
+        pf = prior.astype(np.float64) @ self.rot64.T
+        bq_t = self.anchor_w @ body_target[self.used].astype(np.float64)
+        bq_tf = bq_t @ self.rot64.T
+        snd, rcv = self.arrays["edge_index"]
+        return {
+            "prior": prior,
+            "anchor": bq_t.astype(np.float32),
+            "p_prior": (pf - bq_tf).astype(np.float32),
+            "delta": (bq_tf - self.bq).astype(np.float32),
+            "edge_attr": np.concatenate([self.edge_garment, (pf[rcv] - pf[snd]).astype(np.float32)], axis=1),
+        }
+
+
+_STATIC = ContentCache(8, scope="garment")  # per (garment, canonical body, input configuration): its StaticGraph
+
+
+def static_graph(sample: Sample, config: GarSimConfig | None = None, name: str | None = None) -> StaticGraph:
+    """The cached pose-free part of ``sample``'s graph (the garment validated by the one validator on a miss)."""
+    cfg = config or GarSimConfig()
+    inputs = (
+        cfg.canonicalize_yaw,
+        cfg.knn_garment,
+        cfg.knn_body,
+        cfg.semantic,
+        cfg.semantic_grid,
+        cfg.num_body_vertices,
+    )
+    key = content_key(sample.garment, sample.garment_faces, sample.body_canonical, sample.body_faces) + inputs
+
+    def make() -> StaticGraph:
+        g, faces = as_mesh((sample.garment, sample.garment_faces), f"garment {name or ''}".strip())
+        return StaticGraph(g, faces, np.asarray(sample.body_canonical, dtype=np.float32), sample.body_faces, cfg)
+
+    return _STATIC.get(key, make)
+
+
+def pose_arrays(static: StaticGraph, sample: Sample, name: str | None = None) -> dict[str, np.ndarray]:
+    """The per-pose arrays of ``sample``'s graph (prior, target body, fabric, pins), checked to be finite."""
+    body_t = np.asarray(sample.body_target, dtype=np.float32)
+    prior = np.asarray(sample.prior, dtype=np.float32)
+    if not (np.isfinite(prior).all() and np.isfinite(body_t).all()):
+        raise ValueError(f"sample {name or ''} has non-finite positions (prior or bodies): fix the data")
+    n = len(prior)
+    return {
+        **static.pose(prior, body_t),
+        "fabric": np.repeat(fabric_features(sample)[None], n, axis=0),
+        "pinned": np.asarray(sample.pinned, dtype=bool),
+    }
+
+
 def graph_arrays(
     sample: Sample,
     config: GarSimConfig | None = None,
@@ -206,67 +305,14 @@ def graph_arrays(
 
     ``loss_inputs=False`` (inference) skips the face pairs only the losses need. The body geometry
     neighbourhoods ``body_rel`` are stored once per distinct q (``anchor_index`` maps each vertex to its
-    rows, with ``anchor_weight``), and edges are sorted by receiver. Fresh arrays: the caller may keep them.
+    rows, with ``anchor_weight``), and edges are sorted by receiver. Fresh, writable arrays: the caller may keep
+    them (the runtime reads :func:`static_graph` and :func:`pose_arrays` without copies).
     """
-    cfg = config or GarSimConfig()
-    body_c = np.asarray(sample.body_canonical, dtype=np.float32)
-    body_t = np.asarray(sample.body_target, dtype=np.float32)
-    g, faces = as_mesh((sample.garment, sample.garment_faces), f"garment {name or ''}".strip())  # the one validator
-    prior = np.asarray(sample.prior, dtype=np.float32)
-    n = len(g)
-    if not (np.isfinite(prior).all() and np.isfinite(body_t).all()):
-        raise ValueError(f"sample {name or ''} has non-finite positions (prior or bodies): fix the data")
-
-    # soft anchor q_i: a continuous blend of the canonical body vertices near G_i (cached per garment and body)
-    body = body_frame(body_c, sample.body_faces, cfg.canonicalize_yaw)
-    w = soft_anchor(g, body.vertices).tocoo()
-    used, slot = np.unique(w.col, return_inverse=True)
-    anchor_w = sp.csr_matrix((w.data, (w.row, slot)), shape=(n, len(used)))
-    r64 = body.rot64
-
-    # every vector in the body frame, in float64 (then float32): rotate the points, then subtract
-    gf = g.astype(np.float64) @ r64.T
-    pf = prior.astype(np.float64) @ r64.T
-    bq = anchor_w @ body.framed64[used]
-    bq_t = anchor_w @ body_t[used].astype(np.float64)
-    bq_tf = bq_t @ r64.T
-    p = gf - bq
-    p_prior = pf - bq_tf
-    delta = bq_tf - bq
-    # body neighbourhoods (X^body): every anchoring body vertex with its mesh 1-ring, relative to it
-    nbr = body.ring(cfg.knn_body)[used]
-    body_rel = (body.framed64[nbr] - body.framed64[used][:, None, :]).astype(np.float32)
-    gidx, ei = garment_topology(g, faces, cfg.knn_garment)
-    gar_rel = (gf[gidx] - gf[:, None, :]).astype(np.float32)
-
-    snd, rcv = ei[0], ei[1]
-    edge_attr = np.concatenate([gf[rcv] - gf[snd], pf[rcv] - pf[snd]], axis=1).astype(np.float32)
-    fab = np.repeat(fabric_features(sample)[None], n, axis=0)
-    mass = np.zeros(len(used))
-    np.maximum.at(mass, slot, w.data)
-    sem = semantic_vector(body.framed, used, cfg, bounds=body.bounds, weights=mass)
-
-    arrays = {
-        "pos": g.copy(),
-        "prior": prior.copy(),
-        "anchor": bq_t.astype(np.float32),
-        "p": p.astype(np.float32),
-        "p_prior": p_prior.astype(np.float32),
-        "delta": delta.astype(np.float32),
-        "fabric": fab,
-        "pinned": np.asarray(sample.pinned, dtype=bool).copy(),
-        "gar_rel": gar_rel,
-        "body_rel": body_rel,
-        "anchor_index": np.stack([w.row.astype(np.int64), slot.astype(np.int64)]),
-        "anchor_weight": w.data.astype(np.float32),
-        "edge_index": ei.copy(),  # the cached array stays private
-        "edge_attr": edge_attr,
-        "faces": faces.copy(),
-        "sem": sem[None],
-        "rot": body.rot.copy()[None],
-    }
+    static = static_graph(sample, config, name)
+    arrays = {k: v.copy() for k, v in static.arrays.items()}
+    arrays.update({k: v.copy() for k, v in pose_arrays(static, sample, name).items()})
     if loss_inputs:
-        arrays["face_pairs"] = face_pairs(faces)
+        arrays["face_pairs"] = face_pairs(arrays["faces"])
     if sample.target is not None:
         if not np.isfinite(sample.target).all():
             label = name if name is not None else str(sample.meta.get("name", ""))

@@ -28,7 +28,7 @@ import scipy.sparse as sp
 from garsim.data.sample import Sample
 from garsim.geometry.cache import ContentCache, content_key
 from garsim.model.config import GarSimConfig
-from garsim.model.inputs import graph_arrays
+from garsim.model.inputs import graph_arrays, pose_arrays, static_graph
 from garsim.model.weights import CONFIG_FILE, DEFAULT_KIND, WEIGHTS_FILE, WeightsError, load_verified, read_model_config
 
 if TYPE_CHECKING:  # torch: only for the annotation
@@ -52,10 +52,11 @@ _ACTIVATIONS: dict[str, Callable[[np.ndarray], np.ndarray]] = {
 }
 
 
-def _linear(x: np.ndarray, w: np.ndarray, b: np.ndarray | None) -> np.ndarray:
+def _linear(x: np.ndarray, w: np.ndarray, b: np.ndarray | None, out: np.ndarray | None = None) -> np.ndarray:
+    """x @ w.T + b, into ``out`` when given (a reused buffer: fresh multi-MB arrays cost page faults, ~2x the GEMM)."""
     if x.ndim != 2:  # one GEMM, not one per leading index (numpy's stacked matmul is ~10x slower here)
         return _linear(x.reshape(-1, x.shape[-1]), w, b).reshape(*x.shape[:-1], w.shape[0])
-    y = x @ w.T
+    y = np.matmul(x, w.T, out=out)
     if b is not None:
         y += b
     return y
@@ -70,6 +71,16 @@ def _layer_norm(x: np.ndarray, w: np.ndarray, b: np.ndarray, eps: float = 1e-5) 
     return xc
 
 
+def _mean_matrix(a: Mapping[str, np.ndarray], n: int) -> sp.csr_matrix:
+    """(N, E) the mean over each node's incoming edges (any edge order; ``graph_arrays`` sorts them by receiver)."""
+    rcv = a["edge_index"][1]
+    counts = np.bincount(rcv, minlength=n)
+    order = np.argsort(rcv, kind="stable")
+    inv = (1.0 / np.maximum(counts, 1)).astype(np.float32)
+    indptr = np.concatenate([[0], np.cumsum(counts)])
+    return sp.csr_matrix((inv[rcv[order]], order, indptr), shape=(n, len(rcv)))
+
+
 class _MLP:
     """An ``encoders.MLP`` (or any nn.Sequential of Linear/activation/LayerNorm) from its state-dict entries."""
 
@@ -82,10 +93,15 @@ class _MLP:
         self.act = act
 
     def __call__(
-        self, x: np.ndarray, out_scale: np.ndarray | None = None, out_shift: np.ndarray | None = None
+        self,
+        x: np.ndarray,
+        out_scale: np.ndarray | None = None,
+        out_shift: np.ndarray | None = None,
+        out: np.ndarray | None = None,
     ) -> np.ndarray:
         """The MLP on ``x``, its output then scaled by ``out_scale`` and shifted by ``out_shift`` (per channel;
-        folded into the last layer's weights when that layer is linear)."""
+        folded into the last layer's weights when that layer is linear); a last linear layer writes into ``out``
+        when given."""
         n_linear = sum(kind == "linear" for kind, _, _ in self.layers)
         last = len(self.layers) - 1
         fold = out_scale is not None and self.layers[last][0] == "linear"
@@ -96,7 +112,7 @@ class _MLP:
                 continue
             if fold and i == last:
                 w, b = w * out_scale[:, None], (b if b is not None else 0.0) * out_scale + out_shift
-            x = _linear(x, w, b)
+            x = _linear(x, w, b, out if i == last else None)
             seen += 1
             if seen < n_linear:  # an activation between linear layers, none after the last
                 x = self.act(x)
@@ -171,16 +187,17 @@ class GarSimRuntime:
             return self._act(h.max(axis=1))
         return self._act(h).max(axis=1)
 
-    def forward(self, a: Mapping[str, np.ndarray]) -> np.ndarray:
-        """Predicted garment vertices (N, 3), world coordinates, from one graph's ``graph_arrays``."""
+    def forward(self, a: Mapping[str, np.ndarray], static_key: int | None = None) -> np.ndarray:
+        """Predicted garment vertices (N, 3), world coordinates, from one graph's ``graph_arrays``. ``static_key``
+        names the pose-free arrays (a ``StaticGraph.token``); None: they are keyed by their content."""
         sc = self.scale
-        x_gar, x_body, s = self._static(a)
+        x_gar, x_body, s, mean = self._static(a, static_key)
         fabric = a["fabric"]
         chi = self.garment(np.concatenate([x_gar, fabric, a["p"] * sc, a["p_prior"] * sc], axis=1))
         mu = self.body(np.concatenate([x_body, a["delta"] * sc, s], axis=1))
         node = self.node(np.concatenate([chi, mu], axis=1))
         edge = self.edge(a["edge_attr"] * sc)
-        node = self._process(node, edge, a["edge_index"], fabric)
+        node = self._process(node, edge, a["edge_index"], mean, fabric)
         vec = self._decode(node, fabric)
         world = vec @ a["rot"][0]  # R^T v for every row: body frame -> world
         base = a["anchor"] if self.config.head == "position" else a["prior"]
@@ -188,48 +205,55 @@ class GarSimRuntime:
 
     __call__ = forward
 
-    def _static(self, a: Mapping[str, np.ndarray]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """(garment geometry features, body geometry features at the soft anchors, body-semantic rows): functions
-        of the template garment and the canonical body only, cached by the content of their inputs."""
-        names = ("gar_rel", "body_rel", "anchor_index", "anchor_weight", "sem")
+    def _static(
+        self, a: Mapping[str, np.ndarray], static_key: int | None
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, sp.csr_matrix]:
+        """(garment geometry features, body geometry features at the soft anchors, body-semantic rows, the mean
+        aggregation's (N, E) matrix): functions of the template garment and the canonical body only, cached by
+        ``static_key`` or else by the content of their inputs."""
+        names = ("gar_rel", "body_rel", "anchor_index", "anchor_weight", "sem", "edge_index")
 
-        def compute() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        def compute() -> tuple[np.ndarray, np.ndarray, np.ndarray, sp.csr_matrix]:
             n = len(a["gar_rel"])
             rows, slots = a["anchor_index"]
             enc = self._geometry(a["body_rel"])
             blend = sp.csr_matrix((a["anchor_weight"], (rows, slots)), shape=(n, len(enc)))
             s = np.broadcast_to(self.semantic(a["sem"]), (n, self.config.semantic_dim))
-            return self._geometry(a["gar_rel"]), np.asarray(blend @ enc, dtype=np.float32), s
+            return self._geometry(a["gar_rel"]), np.asarray(blend @ enc, dtype=np.float32), s, _mean_matrix(a, n)
 
-        return _STATIC.get((self._token, content_key(*(a[k] for k in names))), compute)
+        key = ("token", static_key) if static_key is not None else content_key(*(a[k] for k in names))
+        return _STATIC.get((self._token, key), compute)
 
-    def _process(self, node: np.ndarray, edge: np.ndarray, edge_index: np.ndarray, fabric: np.ndarray) -> np.ndarray:
+    def _process(
+        self, node: np.ndarray, edge: np.ndarray, edge_index: np.ndarray, mean: sp.csr_matrix, fabric: np.ndarray
+    ) -> np.ndarray:
+        if self.config.num_steps == 0:
+            return node
         snd, rcv = edge_index
-        n = len(node)
-        counts = np.bincount(rcv, minlength=n)
-        order = np.argsort(rcv, kind="stable")
-        inv = (1.0 / np.maximum(counts, 1)).astype(np.float32)
-        indptr = np.concatenate([[0], np.cumsum(counts)])
-        mean = sp.csr_matrix((inv[rcv[order]], order, indptr), shape=(n, len(rcv)))
         uniform = bool((fabric == fabric[:1]).all())  # one fabric per garment: FiLM once, broadcast
+        # per-edge work buffers, reused by every step (the edge rows outnumber the nodes ~6:1)
+        hid_buf = np.empty((len(rcv), self.steps[0][3].shape[0]), dtype=np.float32)
+        gathered = np.empty_like(hid_buf)
+        edge_out = np.empty_like(edge) if self.config.residual else None  # residual: added to edge right away
         for l in range(self.config.num_steps):
             w_recv, b_recv, w_send, w_edge, rest, node_mlp, film = self.steps[l % len(self.steps)]
-            hid = np.take(_linear(node, w_recv, b_recv), rcv, axis=0)
-            hid += np.take(node @ w_send.T, snd, axis=0)
-            hid += edge @ w_edge.T
+            hid = np.matmul(edge, w_edge.T, out=hid_buf)
+            hid += np.take(_linear(node, w_recv, b_recv), rcv, axis=0, out=gathered)
+            hid += np.take(node @ w_send.T, snd, axis=0, out=gathered)
             hid = self._act(hid)
             if film is not None and uniform:  # one scale/shift for every edge: folded into the last layer
                 scale, shift = np.split(_linear(fabric[:1], *film)[0], 2)
-                new_edge = rest(hid, out_scale=np.float32(1.0) + scale, out_shift=shift)
+                new_edge = rest(hid, out_scale=np.float32(1.0) + scale, out_shift=shift, out=edge_out)
             else:
-                new_edge = rest(hid)
+                new_edge = rest(hid, out=edge_out)
                 if film is not None:
                     scale, shift = np.split(np.take(_linear(fabric, *film), snd, axis=0), 2, axis=1)
                     new_edge = new_edge * (np.float32(1.0) + scale) + shift
             agg = np.asarray(mean @ new_edge, dtype=np.float32)
             new_node = node_mlp(np.concatenate([agg, node], axis=1))
             if self.config.residual:
-                node, edge = node + new_node, edge + new_edge
+                node = node + new_node
+                edge += new_edge  # edge is this forward's own array (the edge encoder's output)
             else:
                 node, edge = new_node, new_edge
         return node
@@ -247,7 +271,8 @@ class GarSimRuntime:
     def predict(self, sample: Sample | Sequence[Sample]) -> np.ndarray | list[np.ndarray]:
         """Sample(s) -> predicted garment vertices (float32), as ``GarSimModel.predict``."""
         if isinstance(sample, Sample):
-            return self.forward(graph_arrays(sample, self.config, loss_inputs=False))
+            static = static_graph(sample, self.config)
+            return self.forward({**static.arrays, **pose_arrays(static, sample)}, static.token)
         return [self.predict(s) for s in sample]  # type: ignore[misc]
 
 
