@@ -30,13 +30,28 @@ def test_bench_inference_tiny(anny_body, model):
     assert r["refine_correct_cpu_ms"] > 0 and r["refine_valid_cpu_ms"] > 0
     assert r["pose_seq_cpu_ms"] > 0 and r["pose_seq_wall_ms"] > 0
     assert r["api_wall_ms"] > 0 and r["api_new_pose_cpu_ms"] > 0 and r["api_new_pose_wall_ms"] > 0
-    assert r["forward_peak_mb"] >= 0 and r["drape_peak_mb"] > 0  # torch's tensors are not traced
+    assert r["drape_peak_mb"] > 0  # forward_peak_mb: see test_forward_peak_counts_the_numpy_forward
     parts = r["prior_cpu_ms"] + r["graph_cpu_ms"] + r["forward_cpu_ms"]
     assert 0 < parts <= r["cpu_ms"] * 1.05 + 0.5  # the three stages make up (almost all of) the call
     assert torch.get_num_threads() == threads and model.training  # state restored
     assert "200 (actual" in format_bench(res)
     with pytest.raises(ValueError, match="repeats"):
         bench_inference(model, sizes=(200,), repeats=0, body=anny_body)
+
+
+def test_forward_peak_counts_the_numpy_forward(anny_body, model):
+    """With the numpy runtime (whose arrays tracemalloc sees; torch's tensors it does not) the forward's peak holds
+    its two per-edge work buffers, (E, mlp_hidden) float32 each with E >= 2N directed edges, and grows by them with
+    the garment."""
+    from garsim.model.runtime import GarSimRuntime
+
+    runtime = GarSimRuntime(model.config, {k: v.numpy() for k, v in model.state_dict().items()})
+    res = bench_inference(runtime, sizes=(200, 800), repeats=1, body=anny_body)
+    per_vertex_mb = 2 * 2 * model.config.mlp_hidden * 4 / 2**20
+    for r in res.values():
+        assert r["forward_peak_mb"] > r["vertices"] * per_vertex_mb
+    small, large = res[200], res[800]
+    assert large["forward_peak_mb"] - small["forward_peak_mb"] > (large["vertices"] - small["vertices"]) * per_vertex_mb
 
 
 def test_drape_once_matches_predict(anny_body, model):

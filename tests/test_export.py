@@ -561,3 +561,34 @@ def test_metadata_normalised_to_json(tmp_path, garment):
     (p,) = export_animation(tmp_path / "a.glb", frames, faces, metadata=given)
     doc, _ = _read_gltf(p)
     assert doc["asset"]["extras"]["garsim"] == {"frames": [1, 2], "scale": 0.5, "count": 3, "flag": True}
+
+
+@pytest.mark.parametrize("ext", [".glb", ".usda", ".pc2", ".gif"])
+def test_each_input_is_checked_once_per_export(tmp_path, garment, body, monkeypatch, ext):
+    """export_animation checks the metadata and the arrays once, however many files the format writes."""
+    from garsim.export import _common
+
+    frames, faces, uvs = garment
+    calls = {"check_metadata": 0, "check_frames": 0}
+
+    def counting(name):
+        check = getattr(_common, name)
+
+        def counted(*args, **kw):
+            calls[name] += 1
+            return check(*args, **kw)
+
+        return counted
+
+    for name in calls:
+        monkeypatch.setattr(_common, name, counting(name))
+    kw = dict(body_frames=body[0][:2], body_faces=body[1], metadata=METADATA) | ({"size": 32} if ext == ".gif" else {})
+    export_animation(tmp_path / f"a{ext}", frames[:2], faces, **kw)
+    assert calls == {"check_metadata": 1, "check_frames": 2}  # the garment's frames and the body's
+
+
+def test_pc2_bad_timing_writes_nothing(tmp_path, garment, body):
+    frames, faces, uvs = garment
+    with pytest.raises(ExportError, match="rate positive"):
+        export_animation(tmp_path / "a.pc2", frames, faces, body_frames=body[0], body_faces=body[1], rate=0)
+    assert list(tmp_path.iterdir()) == []

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import re
+
 import numpy as np
 import pytest
 import trimesh
@@ -264,3 +266,50 @@ def test_bad_uvs_give_one_line_errors(tmp_path, text, pattern):
     v, f = np.eye(3), np.array([[0, 1, 2]])
     with pytest.raises(MeshError, match="UVs face indices outside"):
         save_mesh(tmp_path / "o.obj", v, f, attributes=MeshAttributes(np.zeros((1, 2)), np.ones((1, 3), dtype=int)))
+
+
+TRIANGLE = "v 0 0 0\nv 1 0 0\nv 0 1 0\n"
+
+
+@pytest.mark.parametrize(
+    "text, message",
+    [
+        (TRIANGLE + "# c\r\n\r\nvn 0 0 x\r\nvt x\r\nf 1/1/1 2/1/1 3/1/1\r\n", "line 6 'vn 0 0 x' is malformed: a 'vn'"),
+        (TRIANGLE + "vt 0 0\rvt 0 nan # c\nf 1/1 2/1 3/1\n", "line 5 'vt 0 nan' is malformed: a 'vt' line needs 1"),
+        (TRIANGLE + "  vt\t\nf 1/1 2/1 3/1\n", "line 4 'vt ' is malformed"),
+        (TRIANGLE + "vt 0 0\nf 1/1 2/1 3/0\n", "face 0 references 'vt' 2 but the file has 1 'vt' lines"),
+    ],
+    ids=["the first bad line of either kind, CRLF", "a lone CR ends a line", "no numbers", "index 0"],
+)
+def test_bad_attribute_lines_are_named_by_number(tmp_path, text, message):
+    path = tmp_path / "bad.obj"
+    path.write_bytes(text.encode())
+    with pytest.raises(MeshError, match=re.escape(message)):
+        load_mesh_with_attributes(path)
+
+
+def test_obj_attribute_spellings(tmp_path, caplog):
+    """vt with 1 to 3 numbers (u alone: v = 0; w ignored), relative indices counted at their line, corner fields
+    past v/vt/vn ignored; a corner that is not integers (even one past int64) drops the attributes with a warning."""
+    path = tmp_path / "a.obj"
+    path.write_text(TRIANGLE + "vt 0.5\n  vt 0.1 0.2 0.3 # w\nvn 0 0 1\nf 1/-2/-1 2/-1/1/9 3/2/1\nvt 0.7 0.8\n")
+    _, f, a = load_mesh_with_attributes(path)
+    np.testing.assert_array_equal(a.uvs, [[0.5, 0.0], [0.1, 0.2], [0.7, 0.8]])
+    np.testing.assert_array_equal(a.uv_faces, [[0, 1, 1]])
+    np.testing.assert_array_equal(a.normal_faces, [[0, 0, 0]])
+    for corner in ("3/x/1", "3/99999999999999999999/1"):
+        path.write_text(TRIANGLE + f"v 1 1 0\nvt 0 0\nvn 0 0 1\nf 1/1/1 2/1/1 3/1/1\nf 2/1/1 4/1/1 {corner}\n")
+        with caplog.at_level("WARNING"):
+            _, f, a = load_mesh_with_attributes(path)
+        assert a.empty and f.tolist() == [[0, 1, 2], [1, 3, 2]] and "could not be matched" in caplog.text
+
+
+def test_indented_obj_lines_are_read(tmp_path):
+    """Leading blanks before 'v' / 'f' (allowed by the format) keep every vertex, so faces point where they should."""
+    from garsim.geometry.io import load_mesh
+
+    path = tmp_path / "indented.obj"
+    path.write_text("v 0 0 0\n  v 1 0 0\n\tv 0 1 0\nv 0 0 1\n  f 1 2 3\nf 1 3 4\n")
+    v, f = load_mesh(path)
+    np.testing.assert_array_equal(v, [[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]])
+    np.testing.assert_array_equal(f, [[0, 1, 2], [0, 2, 3]])

@@ -16,7 +16,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from hypothesis.extra import numpy as hnp
 
-from garsim.geometry.io import MeshError, as_mesh, load_mesh, save_mesh, validate_mesh
+from garsim.geometry.io import MeshError, as_mesh, load_mesh, load_mesh_with_attributes, save_mesh, validate_mesh
 
 FUZZ = settings(max_examples=120, deadline=None, suppress_health_check=[HealthCheck.too_slow], derandomize=True)
 EXTENSIONS = (".obj", ".ply", ".glb", ".gltf", ".off", ".stl")
@@ -298,3 +298,93 @@ def test_incomplete_obj_lines(text, pattern):
 def test_small_valid_vertices_random_faces(faces):
     v = np.array([[0.0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1], [1, 1, 1]])
     _call_or_mesh_error(validate_mesh, v, faces)
+
+
+# --- UVs and normals (vt / vn) ---------------------------------------------------------------------------------------
+
+GRID_V = np.array([[x, y, 0.1 * x * y] for y in range(3) for x in range(3)], dtype=np.float64)
+GRID_F = np.array([[a, a + 1, a + 4] for a in (0, 1, 3, 4)] + [[a, a + 4, a + 3] for a in (0, 1, 3, 4)])
+
+
+def _corner_table(f: np.ndarray, *attribute_faces: np.ndarray | None) -> list[tuple]:
+    """Every corner as (its triangle's sorted vertices, vertex, each attribute index): comparable across readers
+    that order or turn the triangles differently."""
+    columns = [np.asarray(f)] + [np.full(np.shape(f), -1) if a is None else np.asarray(a) for a in attribute_faces]
+    return sorted(
+        (tuple(sorted(f[i].tolist())),) + tuple(int(c[i, j]) for c in columns) for i in range(len(f)) for j in range(3)
+    )
+
+
+@FUZZ
+@given(data=st.data())
+def test_obj_attributes_read_back_however_the_file_spells_them(data):
+    """vt/vn lists and corner indices come back exactly whatever the spelling: absolute or relative (negative)
+    indices, lines interleaved, vt with 1 to 3 numbers, corners without vt or vn, comments, blank lines, indentation,
+    tabs, LF or CRLF line ends."""
+    has_uv, has_normal = data.draw(st.sampled_from([(True, True), (True, False), (False, True)]))
+    finite = st.floats(-10, 10, allow_nan=False)
+    k, m = (data.draw(st.integers(1, 6)) if has else 0 for has in (has_uv, has_normal))
+    uvs = np.array(data.draw(st.lists(st.tuples(finite, finite), min_size=k, max_size=k))).reshape(k, 2)
+    normals = np.array(data.draw(st.lists(st.tuples(finite, finite, finite), min_size=m, max_size=m))).reshape(m, 3)
+    uv_faces = np.array(data.draw(st.lists(st.integers(0, max(k - 1, 0)), min_size=24, max_size=24))).reshape(8, 3)
+    n_faces = np.array(data.draw(st.lists(st.integers(0, max(m - 1, 0)), min_size=24, max_size=24))).reshape(8, 3)
+    vt_numbers = data.draw(st.lists(st.sampled_from([1, 2, 3]), min_size=k, max_size=k))
+    uvs[np.array(vt_numbers) == 1, 1] = 0.0  # 'vt u' reads as (u, 0)
+
+    def line(text: str) -> str:  # v and f lines stay plain for the mesh reader (the fast one takes no indentation)
+        indent = data.draw(st.sampled_from(["", " ", "\t "])) if text[:2] in ("vt", "vn") else ""
+        return indent + text + data.draw(st.sampled_from(["", " ", " # note", "#c 1 2"]))
+
+    lines = [f"v {x!r} {y!r} {z!r}" for x, y, z in GRID_V.tolist()]
+    seen = {"vt": 0, "vn": 0, "f": 0}  # the lines of each kind so far: the next one's index
+    for kind in data.draw(st.permutations(["vt"] * k + ["vn"] * m + ["f"] * 8)):
+        i = seen[kind]
+        if data.draw(st.booleans()):
+            lines.append(data.draw(st.sampled_from(["", "# a comment", "   ", "vp 0.5"])))
+        if kind == "vt":
+            lines.append(line("vt " + " ".join(map(repr, (*uvs[i].tolist(), 0.25)[: vt_numbers[i]]))))
+        elif kind == "vn":
+            lines.append(line("vn " + " ".join(map(repr, normals[i].tolist()))))
+        else:
+
+            def index(j: int, count: int, relative: bool) -> str:
+                return str(j - count) if relative and j < count else str(j + 1)
+
+            corners = []
+            for c in range(3):
+                v = str(GRID_F[i, c] + 1)
+                t = index(uv_faces[i, c], seen["vt"], data.draw(st.booleans())) if has_uv else ""
+                n = index(n_faces[i, c], seen["vn"], data.draw(st.booleans())) if has_normal else None
+                corners.append(v + ("/" + t if has_uv or n is not None else "") + ("" if n is None else "/" + n))
+            lines.append(line("f " + " ".join(corners)))
+        seen[kind] += 1
+    end = data.draw(st.sampled_from(["\n", "\r\n"]))
+    path = _write(end.join(lines) + end, ".obj")
+    v, f, attrs = load_mesh_with_attributes(path)
+    np.testing.assert_allclose(v, GRID_V, atol=1e-6)
+    np.testing.assert_array_equal(attrs.uvs if has_uv else np.zeros((0, 2)), uvs)
+    np.testing.assert_array_equal(attrs.normals if has_normal else np.zeros((0, 3)), normals)
+    expected = _corner_table(GRID_F, uv_faces if has_uv else None, n_faces if has_normal else None)
+    assert _corner_table(f, attrs.uv_faces, attrs.normal_faces) == expected
+
+
+_ATTRIBUTE_FIELD = st.sampled_from(
+    ["0", "1", "2", "9", "-1", "-3", "0.5", "1e999", "nan", "x", "", "1/1", "1/2/1", "1//1", "2/-1/-1", "/1", "1/x"]
+    + ["99999999999999999999/1", "1/99999999999999999999", "1/1/1/1", "1_0/1"]
+)
+
+
+@FUZZ
+@given(lines=st.lists(st.tuples(st.sampled_from(["vt", "vn", "f", "v", "#"]), st.lists(_ATTRIBUTE_FIELD, max_size=5))))
+def test_random_attribute_lines_load_or_give_one_line_errors(lines):
+    """A valid mesh followed by random vt / vn / f lines: attributes that fit the mesh, or a one-line MeshError."""
+    text = "".join(f"v {x} {y} {z}\n" for x, y, z in GRID_V.tolist()) + "vt 0 0\nvn 0 0 1\n"
+    text += "".join(f"f {a + 1}/1/1 {b + 1}/1/1 {c + 1}/1/1\n" for a, b, c in GRID_F.tolist())
+    path = _write(text + "".join(" ".join([kind, *fields]) + "\n" for kind, fields in lines), ".obj")
+    try:
+        v, f, attrs = load_mesh_with_attributes(path)
+    except MeshError as exc:
+        assert str(exc) and "\n" not in str(exc) and path.name in str(exc), str(exc)
+        return
+    _is_valid(v, f)
+    attrs.check(len(f), name="fuzz")

@@ -75,7 +75,25 @@ def test_variants_are_deterministic_sized_and_order_free(full):
     np.testing.assert_array_equal(fwd[2].garment, rev[4].garment)  # a@0 variant 0 in both
     other = RemeshAugmented(full, full, copies=2, seed=8)
     assert any(len(other[i].garment) != len(fwd[i].garment) for i in range(2, 6))
-    assert fwd[3] is fwd[3]  # built once
+    np.testing.assert_array_equal(fwd[3].garment, fwd[3].garment)  # rebuilt alike on every access
+    np.testing.assert_array_equal(fwd[3].target, RemeshAugmented(full, full, copies=2, seed=7)[3].target)
+
+
+def test_graph_dataset_builds_each_variant_once(full, monkeypatch):
+    """The graph cache is the only copy: indexing the dataset again does not rebuild a variant."""
+    import garsim.train.augment as augment
+
+    built = []
+
+    def counted(sample, variant, *args):
+        built.append((sample.meta["name"], variant))
+        return remesh_variant(sample, variant, *args)
+
+    monkeypatch.setattr(augment, "remesh_variant", counted)
+    data = GraphDataset(remesh_augmented(full, full, copies=2, seed=1), SMALL, make_graph=build_graph)
+    first = [data[i] for i in range(len(data))]
+    assert all(data[i] is graph for i, graph in enumerate(first))
+    assert sorted(built) == [("a@0", 0), ("a@0", 1), ("b@0", 0), ("b@0", 1)]
 
 
 def test_remesh_augmented_pairs_levels_by_name(full):

@@ -13,7 +13,7 @@ beside the cache; MP4/GIF previews carry none.
 ========================  ===============================================================
 ``.glb`` / ``.gltf``      :func:`write_gltf_animation` - morph target per frame, Y up
 ``.usd/.usda/.usdc``      :func:`write_usd_animation` - time-sampled points, Z up, metres
-``.pc2``                  :func:`write_pc2` + the frame-0 OBJ beside it (Blender Mesh Cache)
+``.pc2``                  :func:`write_pc2_animation` - cache + frame-0 OBJ (Blender Mesh Cache)
 ``.mp4`` / ``.gif``       :func:`write_preview` - rendered preview clip
 ========================  ===============================================================
 """
@@ -25,9 +25,17 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
-from garsim.export._common import ExportError, check_body, check_frames, check_metadata, check_output
+from garsim.export._common import ExportError, check_extension
 from garsim.export.gltf import GLTF_EXTENSIONS, write_gltf_animation
-from garsim.export.pc2 import PC2_EXTENSIONS, read_pc2, write_obj, write_obj_sequence, write_pc2
+from garsim.export.pc2 import (
+    PC2_EXTENSIONS,
+    pc2_files,
+    read_pc2,
+    write_obj,
+    write_obj_sequence,
+    write_pc2,
+    write_pc2_animation,
+)
 from garsim.export.usd import USD_EXTENSIONS, write_usd_animation
 from garsim.export.video import VIDEO_EXTENSIONS, write_preview
 
@@ -43,6 +51,7 @@ __all__ = [
     "write_obj",
     "write_obj_sequence",
     "write_pc2",
+    "write_pc2_animation",
     "write_preview",
     "write_usd_animation",
 ]
@@ -51,10 +60,7 @@ __all__ = [
 def animation_files(path: str | os.PathLike, with_body: bool = False) -> list[Path]:
     """The files ``export_animation(path, ...)`` writes, main first (for checks before any work)."""
     p = Path(path)
-    if p.suffix.lower() != ".pc2":
-        return [p]
-    body = p.with_name(f"{p.stem}_body.pc2")
-    return [p, p.with_suffix(".obj")] + ([body, body.with_suffix(".obj")] if with_body else [])
+    return pc2_files(p, with_body) if p.suffix.lower() == ".pc2" else [p]
 
 
 def export_animation(
@@ -68,49 +74,16 @@ def export_animation(
 
     Keyword arguments go to the writer (``body_frames``, ``body_faces``, ``fps``, ``uvs``, ...).
     ``metadata``: a JSON-serialisable dict (e.g. ``{"model": ..., "temporal_smoothing_frames": ...}``),
-    checked before anything is written and stored where the format keeps such data (see the module
-    docstring); MP4/GIF previews carry none.
+    checked (by the writer, with the rest of the input) before anything is written and stored where the format
+    keeps such data (see the module docstring); MP4/GIF previews carry none.
     ``.pc2`` also writes ``<stem>.obj`` (frame 0, the mesh to attach the cache to; ``uvs``/``normals``
     go there) and, with a body, ``<stem>_body.pc2`` + ``<stem>_body.obj``; ``fps`` is ignored for PC2.
     """
-    p, ext = check_output(path, SUPPORTED_EXTENSIONS, "export_animation")
-    meta = check_metadata(metadata)
+    p, ext = check_extension(path, SUPPORTED_EXTENSIONS, "export_animation")
     if ext in GLTF_EXTENSIONS:
-        return [write_gltf_animation(p, frames, faces, metadata=meta, **kw)]
+        return [write_gltf_animation(p, frames, faces, metadata=metadata, **kw)]
     if ext in USD_EXTENSIONS:
-        return [write_usd_animation(p, frames, faces, metadata=meta, **kw)]
+        return [write_usd_animation(p, frames, faces, metadata=metadata, **kw)]
     if ext in VIDEO_EXTENSIONS:
-        return [write_preview(p, frames, faces, metadata=meta, **kw)]
-    return _export_pc2(p, frames, faces, metadata=meta, **kw)
-
-
-def _export_pc2(
-    p: Path,
-    frames: Any,
-    faces: Any,
-    body_frames: Any = None,
-    body_faces: Any = None,
-    uvs: Any = None,
-    normals: Any = None,
-    start: float = 0.0,
-    rate: float = 1.0,
-    fps: float | None = None,
-    metadata: Mapping[str, Any] | None = None,
-) -> list[Path]:
-    del fps  # PC2 stores frames, not seconds
-    meta = check_metadata(metadata)  # PC2 has no metadata: it goes to the garment's OBJ
-    v = check_frames(frames)
-    body = check_body(body_frames, body_faces, v.shape[0])
-    first_normals = None
-    if normals is not None and getattr(normals, "ndim", 0) == 3:
-        first_normals = normals[0]
-    elif normals is not None:
-        first_normals = normals
-    # the OBJ first: it validates faces/uvs/normals before the cache exists
-    files = animation_files(p, with_body=body is not None)
-    obj = write_obj(files[1], v[0], faces, uvs=uvs, normals=first_normals, metadata=meta)
-    out = [write_pc2(p, v, start=start, rate=rate), obj]
-    if body is not None:
-        out.append(write_pc2(files[2], body[0], start=start, rate=rate))
-        out.append(write_obj(files[3], body[0][0], body[1]))
-    return out
+        return [write_preview(p, frames, faces, metadata=metadata, **kw)]
+    return write_pc2_animation(p, frames, faces, metadata=metadata, **kw)

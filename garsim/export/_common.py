@@ -12,6 +12,7 @@ import json
 import math
 import os
 from collections.abc import Callable, Mapping
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -24,34 +25,37 @@ class ExportError(ValueError):
     """Input an exporter cannot write; the one-line message says what to fix."""
 
 
-def _to_numpy(x: Any) -> np.ndarray:
-    """``np.asarray`` that also takes torch tensors (on any device) and turns ragged input into ExportError."""
+def _to_numpy(x: Any, name: str) -> np.ndarray:
+    """``np.asarray`` that also takes torch tensors (on any device); ragged input is an ExportError naming ``name``."""
     if hasattr(x, "detach") and hasattr(x, "cpu"):
         x = x.detach().cpu().numpy()
     try:
         return np.asarray(x)
     except (TypeError, ValueError, OverflowError) as exc:
         text = str(exc).strip().splitlines()
-        raise ExportError(f"not a numeric array ({text[0] if text else type(exc).__name__})") from None
+        raise ExportError(f"{name}: not a numeric array ({text[0] if text else type(exc).__name__})") from None
 
 
-def check_output(path: str | os.PathLike, supported: tuple[str, ...], what: str) -> tuple[Path, str]:
-    """Check the extension and that the output folder is (or can be made) writable -> (path, extension)."""
+def check_extension(path: str | os.PathLike, supported: tuple[str, ...], what: str) -> tuple[Path, str]:
+    """Check that the extension is one ``what`` writes -> (path, extension)."""
     p = Path(path)
     ext = p.suffix.lower()
     if ext not in supported:
         got = repr(ext) if ext else "a file without an extension"
         raise ExportError(f"{p}: {what} cannot write {got}; use one of {', '.join(supported)}")
+    return p, ext
+
+
+def check_output(path: str | os.PathLike, supported: tuple[str, ...], what: str) -> tuple[Path, str]:
+    """Check the extension and that the output folder is (or can be made) writable -> (path, extension)."""
+    p, ext = check_extension(path, supported, what)
     check_writable_folder(p.parent, label=str(p))
     return p, ext
 
 
 def check_frames(frames: Any, name: str = "frames") -> np.ndarray:
     """(T, N, 3) finite float32 vertex positions, T >= 1, N >= 1."""
-    try:
-        a = _to_numpy(frames)
-    except ExportError as exc:
-        raise ExportError(f"{name}: {exc}") from None
+    a = _to_numpy(frames, name)
     if a.dtype.kind not in "iuf":
         raise ExportError(f"{name}: must be real numbers, got dtype {a.dtype}")
     if a.ndim == 2 and a.shape[-1] == 3:
@@ -74,10 +78,7 @@ def check_frames(frames: Any, name: str = "frames") -> np.ndarray:
 
 def check_faces(faces: Any, num_vertices: int, name: str = "faces") -> np.ndarray:
     """(F, 3) int64 triangle indices in [0, num_vertices), F >= 1."""
-    try:
-        f = _to_numpy(faces)
-    except ExportError as exc:
-        raise ExportError(f"{name}: {exc}") from None
+    f = _to_numpy(faces, name)
     if f.ndim != 2 or f.shape[1] != 3 or f.shape[0] == 0:
         raise ExportError(f"{name}: expected a non-empty (F, 3) triangle index array, got shape {f.shape}")
     if f.dtype.kind == "f":
@@ -107,38 +108,28 @@ def check_body(body_frames: Any, body_faces: Any, num_frames: int) -> tuple[np.n
     return bv, check_faces(body_faces, bv.shape[1], name="body_faces")
 
 
+def _per_vertex(x: Any, name: str, shapes: tuple[tuple[int, ...], ...], expected: str) -> np.ndarray | None:
+    """Optional per-vertex data: finite float32 of one of ``shapes`` (``expected`` says which), or None."""
+    if x is None:
+        return None
+    a = _to_numpy(x, name)
+    if a.dtype.kind not in "iuf" or a.shape not in shapes:
+        raise ExportError(f"{name}: expected {expected}, got {a.shape} {a.dtype}")
+    a = a.astype(np.float32)
+    if not np.isfinite(a).all():
+        raise ExportError(f"{name}: contain NaN/inf")
+    return a
+
+
 def check_uvs(uvs: Any, num_vertices: int) -> np.ndarray | None:
     """(N, 2) finite float32 per-vertex UVs, or None."""
-    if uvs is None:
-        return None
-    try:
-        u = _to_numpy(uvs)
-    except ExportError as exc:
-        raise ExportError(f"uvs: {exc}") from None
-    if u.dtype.kind not in "iuf" or u.shape != (num_vertices, 2):
-        raise ExportError(f"uvs: expected one (u, v) per vertex, shape ({num_vertices}, 2), got {u.shape} {u.dtype}")
-    u = u.astype(np.float32)
-    if not np.isfinite(u).all():
-        raise ExportError("uvs: contain NaN/inf")
-    return u
+    return _per_vertex(uvs, "uvs", ((num_vertices, 2),), f"one (u, v) per vertex, shape ({num_vertices}, 2)")
 
 
 def check_normals(normals: Any, num_frames: int, num_vertices: int) -> np.ndarray | None:
     """Per-vertex normals, (N, 3) static or (T, N, 3) per frame, finite float32, or None."""
-    if normals is None:
-        return None
-    try:
-        n = _to_numpy(normals)
-    except ExportError as exc:
-        raise ExportError(f"normals: {exc}") from None
-    if n.dtype.kind not in "iuf" or n.shape not in ((num_vertices, 3), (num_frames, num_vertices, 3)):
-        raise ExportError(
-            f"normals: expected ({num_vertices}, 3) or ({num_frames}, {num_vertices}, 3), got {n.shape} {n.dtype}"
-        )
-    n = n.astype(np.float32)
-    if not np.isfinite(n).all():
-        raise ExportError("normals: contain NaN/inf")
-    return n
+    shapes = ((num_vertices, 3), (num_frames, num_vertices, 3))
+    return _per_vertex(normals, "normals", shapes, f"({num_vertices}, 3) or ({num_frames}, {num_vertices}, 3)")
 
 
 def check_fps(fps: Any) -> float:
@@ -189,6 +180,42 @@ def check_metadata(metadata: Any) -> dict[str, Any] | None:
         return _json_value(metadata, "metadata")
     except RecursionError:
         raise ExportError("metadata is nested too deeply or contains itself; pass a plain JSON-like dict") from None
+
+
+@dataclass(frozen=True)
+class Animation:
+    """An exporter's checked input (:func:`check_animation`): garment frames (T, N, 3) float32 and faces (F, 3)
+    int64, the optional body (frames (T, Vb, 3), faces), per-vertex UVs (N, 2), normals (N, 3) or (T, N, 3), and
+    JSON metadata."""
+
+    frames: np.ndarray
+    faces: np.ndarray
+    body: tuple[np.ndarray, np.ndarray] | None = None
+    uvs: np.ndarray | None = None
+    normals: np.ndarray | None = None
+    metadata: dict[str, Any] | None = None
+
+
+def check_animation(
+    frames: Any,
+    faces: Any,
+    body_frames: Any = None,
+    body_faces: Any = None,
+    uvs: Any = None,
+    normals: Any = None,
+    metadata: Mapping[str, Any] | None = None,
+    name: str = "frames",
+) -> Animation:
+    """Every exporter's input checks, once: frames (named ``name`` in messages), faces, body, UVs, normals, metadata."""
+    v = check_frames(frames, name=name)
+    return Animation(
+        frames=v,
+        faces=check_faces(faces, v.shape[1]),
+        body=check_body(body_frames, body_faces, v.shape[0]),
+        uvs=check_uvs(uvs, v.shape[1]),
+        normals=check_normals(normals, v.shape[0], v.shape[1]),
+        metadata=check_metadata(metadata),
+    )
 
 
 def metadata_json(metadata: Mapping[str, Any]) -> str:

@@ -28,18 +28,7 @@ from typing import Any
 import numpy as np
 
 from garsim.atomic import atomic_write_bytes
-from garsim.export._common import (
-    ExportError,
-    check_body,
-    check_faces,
-    check_fps,
-    check_frames,
-    check_metadata,
-    check_normals,
-    check_output,
-    check_uvs,
-    to_y_up,
-)
+from garsim.export._common import ExportError, check_animation, check_fps, check_output, to_y_up
 
 GLTF_EXTENSIONS: tuple[str, ...] = (".glb", ".gltf")
 
@@ -163,16 +152,12 @@ def write_gltf_animation(
     dict stored as ``asset.extras.garsim`` (and ``scenes[0].extras.garsim``).
     """
     p, ext = check_output(path, GLTF_EXTENSIONS, "write_gltf_animation")
-    v = check_frames(frames)
-    f = check_faces(faces, v.shape[1])
-    body = check_body(body_frames, body_faces, v.shape[0])
+    a = check_animation(frames, faces, body_frames, body_faces, uvs, normals, metadata)
     fps = check_fps(fps)
-    u = check_uvs(uvs, v.shape[1])
-    n = check_normals(normals, v.shape[0], v.shape[1])
     interp = str(interpolation).upper()
     if interp not in ("LINEAR", "STEP"):
         raise ExportError(f"interpolation must be 'LINEAR' or 'STEP', got {interpolation!r}")
-    meta = check_metadata(metadata)
+    v, f, body, u, n, meta = a.frames, a.faces, a.body, a.uvs, a.normals, a.metadata
     if y_up:
         v = to_y_up(v)
         n = None if n is None else to_y_up(n)

@@ -23,15 +23,13 @@ from typing import Any
 
 import numpy as np
 
-from garsim.atomic import atomic_write, atomic_write_bytes
+from garsim.atomic import atomic_write_bytes
 from garsim.export._common import (
+    Animation,
     ExportError,
-    check_faces,
+    check_animation,
     check_frames,
-    check_metadata,
-    check_normals,
     check_output,
-    check_uvs,
     check_writable_folder,
     metadata_json,
 )
@@ -42,6 +40,20 @@ PC2_HEADER = struct.Struct("<12siiffi")  # 32 bytes
 PC2_EXTENSIONS: tuple[str, ...] = (".pc2",)
 
 
+def _check_timing(start: Any, rate: Any) -> tuple[float, float]:
+    """(start frame, sample rate) of a cache: finite, and the rate positive."""
+    start, rate = float(start), float(rate)
+    if not (np.isfinite(start) and np.isfinite(rate) and rate > 0):
+        raise ExportError(f"write_pc2: start must be finite and rate positive, got start={start}, rate={rate}")
+    return start, rate
+
+
+def _pc2_bytes(frames: np.ndarray, start: float, rate: float) -> bytes:
+    """A PC2 file of checked (T, N, 3) frames."""
+    header = PC2_HEADER.pack(PC2_MAGIC, 1, frames.shape[1], start, rate, frames.shape[0])
+    return header + np.ascontiguousarray(frames, dtype="<f4").tobytes()
+
+
 def write_pc2(path: str | os.PathLike, frames: Any, start: float = 0.0, rate: float = 1.0) -> Path:
     """Write (T, N, 3) vertex positions as a PC2 point cache; ``start`` frame, ``rate`` = sampleRate field.
 
@@ -49,11 +61,40 @@ def write_pc2(path: str | os.PathLike, frames: Any, start: float = 0.0, rate: fl
     """
     p, _ = check_output(path, PC2_EXTENSIONS, "write_pc2")
     v = check_frames(frames)
-    start, rate = float(start), float(rate)
-    if not (np.isfinite(start) and np.isfinite(rate) and rate > 0):
-        raise ExportError(f"write_pc2: start must be finite and rate positive, got start={start}, rate={rate}")
-    header = PC2_HEADER.pack(PC2_MAGIC, 1, v.shape[1], start, rate, v.shape[0])
-    return atomic_write_bytes(p, header + np.ascontiguousarray(v, dtype="<f4").tobytes())
+    return atomic_write_bytes(p, _pc2_bytes(v, *_check_timing(start, rate)))
+
+
+def pc2_files(path: str | os.PathLike, with_body: bool = False) -> list[Path]:
+    """The files :func:`write_pc2_animation` writes: the cache, its frame-0 OBJ, then the body's two."""
+    p = Path(path)
+    body = p.with_name(f"{p.stem}_body.pc2")
+    return [p, p.with_suffix(".obj")] + ([body, body.with_suffix(".obj")] if with_body else [])
+
+
+def write_pc2_animation(
+    path: str | os.PathLike,
+    frames: Any,
+    faces: Any,
+    body_frames: Any = None,
+    body_faces: Any = None,
+    uvs: Any = None,
+    normals: Any = None,
+    start: float = 0.0,
+    rate: float = 1.0,
+    fps: float | None = None,
+    metadata: Mapping[str, Any] | None = None,
+) -> list[Path]:
+    """Write the PC2 cache, the frame-0 OBJ to attach it to (``uvs``, ``normals`` and ``metadata`` go there) and,
+    with a body, the body's two (:func:`pc2_files`) -> those paths; everything is checked before the first write.
+    ``fps`` is ignored: PC2 stores frames, not seconds."""
+    del fps
+    p, _ = check_output(path, PC2_EXTENSIONS, "write_pc2_animation")
+    a = check_animation(frames, faces, body_frames, body_faces, uvs, normals, metadata)
+    timing = _check_timing(start, rate)
+    parts = [a] if a.body is None else [a, Animation(*a.body)]
+    files = pc2_files(p, with_body=a.body is not None)
+    data = [blob for part in parts for blob in (_pc2_bytes(part.frames, *timing), _frame_obj(part, 0))]
+    return [atomic_write_bytes(file, blob) for file, blob in zip(files, data)]
 
 
 def read_pc2(path: str | os.PathLike) -> tuple[np.ndarray, float, float]:
@@ -80,28 +121,24 @@ def read_pc2(path: str | os.PathLike) -> tuple[np.ndarray, float, float]:
 OBJ_METADATA_PREFIX = "# garsim "
 
 
-def _obj_text(
-    vertices: np.ndarray,
-    faces: np.ndarray,
-    uvs: np.ndarray | None,
-    normals: np.ndarray | None,
-    metadata: dict[str, Any] | None = None,
-) -> bytes:
-    """OBJ text with one ``v`` (and ``vt``/``vn``) per vertex, in order; faces use 1-based ``v/vt/vn`` indices.
+def _frame_obj(a: Animation, k: int) -> bytes:
+    """OBJ text of frame ``k``: one ``v`` (and ``vt``/``vn``) per vertex, in order, faces with 1-based ``v/vt/vn``
+    indices, the normals frame ``k``'s when they are per frame.
 
-    Validated ``metadata`` becomes the comment line ``# garsim {json}`` right after the header (ASCII JSON
-    on one line: ``json.dumps`` escapes newlines and non-ASCII characters).
+    Metadata becomes the comment line ``# garsim {json}`` right after the header (ASCII JSON on one line:
+    ``json.dumps`` escapes newlines and non-ASCII characters).
     """
+    normals = a.normals if a.normals is None or a.normals.ndim == 2 else a.normals[k]
     per_vertex = MeshAttributes(
-        uvs=uvs,
-        uv_faces=None if uvs is None else faces,
+        uvs=a.uvs,
+        uv_faces=None if a.uvs is None else a.faces,
         normals=normals,
-        normal_faces=None if normals is None else faces,
+        normal_faces=None if normals is None else a.faces,
     )
     header = "garsim export"
-    if metadata is not None:
-        header += "\n" + OBJ_METADATA_PREFIX + metadata_json(metadata)
-    return obj_text(vertices, faces, per_vertex, header=header)
+    if a.metadata is not None:
+        header += "\n" + OBJ_METADATA_PREFIX + metadata_json(a.metadata)
+    return obj_text(a.frames[k], a.faces, per_vertex, header=header)
 
 
 def write_obj(
@@ -117,12 +154,8 @@ def write_obj(
     ``metadata``: a JSON-serialisable dict written as the comment line ``# garsim {json}`` after the header.
     """
     p, _ = check_output(path, (".obj",), "write_obj")
-    v = check_frames(_as_frame_stack(vertices), name="vertices")[0]
-    f = check_faces(faces, len(v))
-    u = check_uvs(uvs, len(v))
-    n = check_normals(normals, 1, len(v))
-    meta = check_metadata(metadata)
-    return atomic_write_bytes(p, _obj_text(v, f, u, None if n is None else n.reshape(-1, 3), meta))
+    a = check_animation(_as_frame_stack(vertices), faces, uvs=uvs, normals=normals, metadata=metadata, name="vertices")
+    return atomic_write_bytes(p, _frame_obj(a, 0))
 
 
 def _as_frame_stack(vertices: Any) -> Any:
@@ -148,14 +181,5 @@ def write_obj_sequence(
     if not stem or os.sep in stem or (os.altsep and os.altsep in stem):
         raise ExportError(f"write_obj_sequence: stem must be a plain file name prefix, got {stem!r}")
     folder = check_writable_folder(folder)
-    v = check_frames(frames)
-    f = check_faces(faces, v.shape[1])
-    u = check_uvs(uvs, v.shape[1])
-    n = check_normals(normals, v.shape[0], v.shape[1])
-    meta = check_metadata(metadata)
-    paths = []
-    for k in range(v.shape[0]):
-        nk = None if n is None else (n if n.ndim == 2 else n[k])
-        text = _obj_text(v[k], f, u, nk, meta)
-        paths.append(atomic_write(folder / f"{stem}_{k:04d}.obj", lambda tmp, t=text: Path(tmp).write_bytes(t)))
-    return paths
+    a = check_animation(frames, faces, uvs=uvs, normals=normals, metadata=metadata)
+    return [atomic_write_bytes(folder / f"{stem}_{k:04d}.obj", _frame_obj(a, k)) for k in range(len(a.frames))]

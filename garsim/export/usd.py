@@ -21,18 +21,7 @@ from typing import Any
 
 import numpy as np
 
-from garsim.export._common import (
-    atomic_write_ext,
-    check_body,
-    check_faces,
-    check_fps,
-    check_frames,
-    check_metadata,
-    check_normals,
-    check_output,
-    check_uvs,
-    metadata_json,
-)
+from garsim.export._common import atomic_write_ext, check_animation, check_fps, check_output, metadata_json
 
 USD_EXTENSIONS: tuple[str, ...] = (".usd", ".usda", ".usdc")
 
@@ -86,13 +75,8 @@ def write_usd_animation(
     ``customLayerData["garsim"]``.
     """
     p, _ = check_output(path, USD_EXTENSIONS, "write_usd_animation")
-    v = check_frames(frames)
-    f = check_faces(faces, v.shape[1])
-    body = check_body(body_frames, body_faces, v.shape[0])
+    a = check_animation(frames, faces, body_frames, body_faces, uvs, normals, metadata)
     fps = check_fps(fps)
-    u = check_uvs(uvs, v.shape[1])
-    n = check_normals(normals, v.shape[0], v.shape[1])
-    meta = check_metadata(metadata)
 
     from pxr import Usd, UsdGeom
 
@@ -102,16 +86,16 @@ def write_usd_animation(
     stage.SetTimeCodesPerSecond(fps)
     stage.SetFramesPerSecond(fps)
     stage.SetStartTimeCode(0.0)
-    stage.SetEndTimeCode(float(v.shape[0] - 1))
+    stage.SetEndTimeCode(float(a.frames.shape[0] - 1))
     root = UsdGeom.Xform.Define(stage, "/Scene")
     stage.SetDefaultPrim(root.GetPrim())
-    _define_mesh(stage, "/Scene/Garment", v, f, u, n)
-    if body is not None:
-        _define_mesh(stage, "/Scene/Body", body[0], body[1], None, None)
+    _define_mesh(stage, "/Scene/Garment", a.frames, a.faces, a.uvs, a.normals)
+    if a.body is not None:
+        _define_mesh(stage, "/Scene/Body", *a.body, None, None)
     layer = stage.GetRootLayer()
     layer.documentation = "garsim garment animation"
-    if meta is not None:
-        layer.customLayerData = {"garsim": metadata_json(meta)}
+    if a.metadata is not None:
+        layer.customLayerData = {"garsim": metadata_json(a.metadata)}
 
     def write(tmp: str) -> None:
         if not layer.Export(tmp):

@@ -16,16 +16,7 @@ from typing import Any
 
 import numpy as np
 
-from garsim.export._common import (
-    ExportError,
-    atomic_write_ext,
-    check_body,
-    check_faces,
-    check_fps,
-    check_frames,
-    check_metadata,
-    check_output,
-)
+from garsim.export._common import ExportError, atomic_write_ext, check_animation, check_fps, check_output
 
 VIDEO_EXTENSIONS: tuple[str, ...] = (".mp4", ".gif")
 GARMENT_COLOR = "#3b75af"
@@ -77,16 +68,14 @@ def write_preview(
     from garsim.geometry.render import render_image
 
     p, ext = check_output(path, VIDEO_EXTENSIONS, "write_preview")
-    v = check_frames(frames)
-    f = check_faces(faces, v.shape[1])
-    body = check_body(body_frames, body_faces, v.shape[0])
+    a = check_animation(frames, faces, body_frames, body_faces, metadata=metadata)  # uvs/normals: not drawn
     fps = check_fps(fps)
     if int(size) < 16:
         raise ExportError(f"size must be at least 16 pixels, got {size}")
     if int(max_frames) < 1:
         raise ExportError(f"max_frames must be at least 1, got {max_frames}")
-    check_metadata(metadata)
-    del uvs, normals, metadata
+    del uvs, normals
+    v, f, body = a.frames, a.faces, a.body
     views = [views] if isinstance(views, (str, int, float)) else list(views)
 
     keep = _frame_indices(v.shape[0], int(max_frames))

@@ -29,6 +29,7 @@ faces +Z as glTF expects) and ``load_mesh(..., y_up=True)`` rotates back.
 
 from __future__ import annotations
 
+import itertools
 import logging
 import os
 import re
@@ -229,8 +230,19 @@ def _obj_candidate_lines(data: bytes) -> np.ndarray:
     return starts[pick]
 
 
-_OBJ_V = re.compile(rb"^v[ \t]+(\S+)[ \t]+(\S+)[ \t]+(\S+)", re.M)
-_OBJ_F = re.compile(rb"^f[ \t]+([^\r\n#]*)", re.M)
+_OBJ_V = re.compile(rb"^[ \t]*v[ \t]+(\S+)[ \t]+(\S+)[ \t]+(\S+)", re.M)  # indented lines count too
+_OBJ_F = re.compile(rb"^[ \t]*f[ \t]+([^\r\n#]*)", re.M)
+
+
+def _fan_corners(sizes: np.ndarray) -> np.ndarray:
+    """(T, 3) indices into the flat corner list of polygons with ``sizes`` (each >= 3) corners, fan-triangulated in
+    order: a k-corner polygon gives the k - 2 triangles (0, j, j + 1)."""
+    start = np.concatenate(([0], np.cumsum(sizes)[:-1]))
+    fans = sizes - 2
+    face_of = np.repeat(np.arange(len(sizes)), fans)
+    j = np.arange(fans.sum()) - np.repeat(np.cumsum(fans) - fans, fans) + 1  # 1 .. k-2 within each face
+    base = start[face_of]
+    return np.stack([base, base + j, base + j + 1], axis=1)
 
 
 def _read_obj_fast(data: bytes) -> tuple[np.ndarray, np.ndarray] | None:
@@ -250,26 +262,24 @@ def _read_obj_fast(data: bytes) -> tuple[np.ndarray, np.ndarray] | None:
         return None
     if flat.size == 0 or flat.min() < 1:
         return None
-    flat -= 1
     sizes = np.fromiter((len(line) for line in lines), dtype=np.int64, count=len(lines))
-    start = np.concatenate(([0], np.cumsum(sizes)[:-1]))
-    fans = sizes - 2
-    face_of = np.repeat(np.arange(len(lines)), fans)
-    j = np.arange(fans.sum()) - np.repeat(np.cumsum(fans) - fans, fans) + 1  # 1 .. k-2 within each face
-    base = start[face_of]
-    faces = np.stack([flat[base], flat[base + j], flat[base + j + 1]], axis=1)
-    return vertices, faces
+    return vertices, flat[_fan_corners(sizes)] - 1
 
 
-def _check_obj_lines(p: Path) -> None:
+def _read_file(p: Path) -> bytes:
+    """The bytes of ``p``; a read error is a MeshError."""
+    try:
+        return p.read_bytes()
+    except OSError as exc:
+        raise MeshError(f"{p}: cannot read the file ({_first_line(exc)})") from None
+
+
+def _check_obj_lines(p: Path, data: bytes) -> None:
     """Refuse OBJ 'v' / 'vn' / 'f' lines with fewer than 3 fields, which trimesh would silently drop or misread.
 
     An incomplete last line (too few fields, or a number cut short) means the file was cut off: the message
     says it is truncated."""
-    try:
-        data = p.read_bytes().rstrip()
-    except OSError as exc:
-        raise MeshError(f"{p}: cannot read the file ({_first_line(exc)})") from None
+    data = data.rstrip()
     if not data:
         return
     for start in _obj_candidate_lines(data).tolist():
@@ -371,25 +381,97 @@ class MeshAttributes:
         return self if self.normals is None else replace(self, normals=rotate(self.normals))
 
 
-def _obj_index(token: bytes, count: int) -> int:
-    """A 1-based OBJ index (negative: relative to the ``count`` items read so far) -> 0-based, or -1 if absent."""
-    if not token:
-        return -1
-    i = int(token)
-    return i - 1 if i > 0 else count + i
+_OBJ_LINE = rb"\n[ \t\x0b\x0c]*"  # a line's start in _obj_plain_text, up to its first field
+_OBJ_KIND = re.compile(_OBJ_LINE + rb"(vt|vn|v|f)(?!\S)")
+_OBJ_FACE = re.compile(_OBJ_LINE + rb"f(?!\S)([^\n]*)")
+_OBJ_NUMBERS = {b"vt": (1, 2), b"vn": (3, 3)}
+"""Attribute line kind -> (numbers it needs, numbers kept): a ``vt`` w and a second ``vt`` number are optional."""
+_OBJ_VALUES = {
+    kind: re.compile(_OBJ_LINE + kind + rb"(?!\S)" + rb"[ \t\x0b\x0c]*(\S*)" * keep)
+    for kind, (_, keep) in _OBJ_NUMBERS.items()
+}
 
 
-def _obj_floats(fields: list[bytes], need: int, keep: int, p: Path, lineno: int, kind: str) -> list[float]:
+def _obj_plain_text(data: bytes) -> bytes:
+    """OBJ text for the attribute patterns: ``\\n`` line ends only (the lines ``bytes.splitlines`` sees), comments
+    removed, and a leading ``\\n`` so that every line starts after one (a literal the regex engine finds fast)."""
+    if b"\r" in data:
+        data = data.replace(b"\r\n", b"\n").replace(b"\r", b"\n")
+    return b"\n" + (re.sub(rb"#[^\n]*", b"", data) if b"#" in data else data)
+
+
+def _parses(field: bytes, dtype: type) -> bool:
+    """Whether one OBJ field casts to ``dtype``."""
     try:
-        values = [float(x) for x in fields[:keep]]
-    except ValueError:
-        values = []
-    if len(values) < need or not all(np.isfinite(values)):
-        shown = b" ".join(fields).decode("utf-8", errors="replace")[:60]
-        raise MeshError(
-            f"{p}: line {lineno} '{kind} {shown}' is malformed: a '{kind}' line needs {need} finite numbers"
-        )
-    return values + [0.0] * (keep - len(values))
+        np.array(field).astype(dtype)
+    except (ValueError, OverflowError):
+        return False
+    return True
+
+
+def _parse_fields(fields: np.ndarray, dtype: type) -> tuple[np.ndarray, np.ndarray]:
+    """A bytes array of OBJ fields (empty read as 0) -> (the numbers as ``dtype``, mask of the fields that parse);
+    vectorised, field by field (Python's ``int``/``float`` rules, as numpy's cast) only when some field does not."""
+    padded = np.where(fields == b"", b"0", fields)
+    try:
+        return padded.astype(dtype), np.ones(fields.shape, dtype=bool)
+    except (ValueError, OverflowError):
+        ok = np.array([_parses(x, dtype) for x in padded.ravel()], dtype=bool).reshape(fields.shape)
+        values = np.zeros(fields.shape, dtype=dtype)
+        values[ok] = padded[ok].astype(dtype)
+        return values, ok
+
+
+def _obj_values(text: bytes, kind: bytes) -> tuple[np.ndarray, np.ndarray]:
+    """The (K, keep) float64 rows of the ``vt`` or ``vn`` lines (absent optional numbers 0) and the (K,) mask of the
+    malformed ones: too few numbers, or one that does not parse or is not finite."""
+    need, keep = _OBJ_NUMBERS[kind]
+    fields = np.array(_OBJ_VALUES[kind].findall(text), dtype=bytes).reshape(-1, keep)
+    values, ok = _parse_fields(fields, np.float64)
+    return values, (fields[:, need - 1] == b"") | ~(ok & np.isfinite(values)).all(axis=1)
+
+
+def _check_obj_values(text: bytes, bad: dict[bytes, np.ndarray], p: Path) -> None:
+    """Raise MeshError for the first malformed ``vt``/``vn`` line in the file (``bad``: each kind's malformed rows)."""
+    starts = {
+        kind: next(itertools.islice(_OBJ_VALUES[kind].finditer(text), int(np.argmax(rows)), None)).start()
+        for kind, rows in bad.items()
+        if rows.any()
+    }
+    if not starts:
+        return
+    kind = min(starts, key=starts.__getitem__)
+    start = starts[kind] + 1  # past the newline the match starts with
+    end = text.find(b"\n", start)
+    shown = b" ".join(text[start : end if end >= 0 else None].split()[1:]).decode("utf-8", errors="replace")[:60]
+    lineno = text.count(b"\n", 0, start)
+    k = kind.decode()
+    raise MeshError(
+        f"{p}: line {lineno} '{k} {shown}' is malformed: a '{k}' line needs {_OBJ_NUMBERS[kind][0]} finite numbers"
+    )
+
+
+def _obj_corners(text: bytes) -> np.ndarray:
+    """(T, 3 corners, v/vt/vn) 0-based indices of the fan-triangulated ``f`` lines, -1 where a corner has no such
+    index; a negative index counts back from the lines read so far. Lines with fewer than 3 corners, or a corner
+    that is not integers, are skipped (the mesh reader has already read or refused them)."""
+    rests = _OBJ_FACE.findall(text)
+    sizes = np.fromiter((len(r.split()) for r in rests), dtype=np.int64, count=len(rests))
+    heads, rest = [], np.array(b" ".join(rests).split(), dtype=bytes)
+    for _ in range(3):  # "v/vt/vn" -> v, vt, vn (each possibly empty; a 4th field and beyond dropped)
+        head, _, rest = np.moveaxis(np.char.partition(rest, b"/"), -1, 0)
+        heads.append(head)
+    fields = np.stack(heads, axis=1)
+    raw, ok = _parse_fields(fields, np.int64)
+    line_of = np.repeat(np.arange(len(rests)), sizes)
+    good = (sizes >= 3) & (np.bincount(line_of, weights=~ok.all(axis=1), minlength=len(rests)) == 0)
+    absent = fields == b""
+    if (raw[~absent] <= 0).any():  # relative indices: count the v/vt/vn lines above each f line
+        kinds = np.array(_OBJ_KIND.findall(text))
+        seen = np.stack([np.cumsum(kinds == k) for k in (b"v", b"vt", b"vn")], axis=1)[kinds == b"f"]
+        raw = np.where(raw > 0, raw, seen[line_of] + raw + 1)
+    idx = np.where(absent, -1, raw - 1)
+    return idx[good[line_of]][_fan_corners(sizes[good])]
 
 
 def _corner_map(src: np.ndarray, dst: np.ndarray) -> np.ndarray | None:
@@ -415,55 +497,27 @@ def _corner_map(src: np.ndarray, dst: np.ndarray) -> np.ndarray | None:
     return out
 
 
-def _read_obj_attributes(p: Path, faces: np.ndarray) -> MeshAttributes:
-    """The ``vt``/``vn`` lists of an OBJ and their corner indices, fan-triangulated and matched to ``faces``
-    (trimesh's triangles of the same file). Raises MeshError for malformed or out-of-range ``vt``/``vn`` data."""
-    data = p.read_bytes()
+def _read_obj_attributes(data: bytes, p: Path, faces: np.ndarray) -> MeshAttributes:
+    """The ``vt``/``vn`` lists of an OBJ (its bytes ``data``) and their corner indices, fan-triangulated and matched
+    to ``faces`` (the mesh reader's triangles of the same file). Raises MeshError for malformed or out-of-range
+    ``vt``/``vn`` data."""
     if b"vt" not in data and b"vn" not in data:
         return MeshAttributes()
-    counts = {b"v": 0, b"vt": 0, b"vn": 0}
-    uvs: list[list[float]] = []
-    normals: list[list[float]] = []
-    tri: list[tuple[int, int, int]] = []  # (v, vt, vn) per triangle corner
-    for lineno, raw in enumerate(data.splitlines(), 1):
-        fields = (raw.split(b"#", 1)[0] if b"#" in raw else raw).split()
-        if not fields:
-            continue
-        kind = fields[0]
-        if kind in counts:
-            counts[kind] += 1
-            if kind == b"vt":
-                uvs.append(_obj_floats(fields[1:], 1, 2, p, lineno, "vt"))
-            elif kind == b"vn":
-                normals.append(_obj_floats(fields[1:], 3, 3, p, lineno, "vn"))
-        elif kind == b"f" and len(fields) >= 4:
-            try:
-                corners = []
-                for token in fields[1:]:
-                    parts = token.split(b"/") + [b"", b""]
-                    corners.append(
-                        (
-                            _obj_index(parts[0], counts[b"v"]),
-                            _obj_index(parts[1], counts[b"vt"]),
-                            _obj_index(parts[2], counts[b"vn"]),
-                        )
-                    )
-            except ValueError:
-                continue  # trimesh has already read (or refused) the face
-            for j in range(1, len(corners) - 1):
-                tri.extend((corners[0], corners[j], corners[j + 1]))
-    if not tri:
+    text = _obj_plain_text(data)
+    (uvs, bad_uvs), (normals, bad_normals) = _obj_values(text, b"vt"), _obj_values(text, b"vn")
+    _check_obj_values(text, {b"vt": bad_uvs, b"vn": bad_normals}, p)
+    c = _obj_corners(text)
+    if not len(c):
         return MeshAttributes()
-    c = np.asarray(tri, dtype=np.int64).reshape(-1, 3, 3)  # (triangles, corner, v/vt/vn)
     where = _corner_map(c[:, :, 0], faces)
     if where is None:
         log.warning("%s: the faces' texture/normal indices could not be matched to the triangles; dropped", p)
         return MeshAttributes()
     out: dict[str, np.ndarray | None] = {}
-    for name, values, col, width in (("uv", uvs, 1, 2), ("normal", normals, 2, 3)):
+    for name, values, col in (("uv", uvs, 1), ("normal", normals, 2)):
         idx = c[:, :, col].reshape(-1)[where]
         out[name], out[name + "_faces"] = None, None
-        if not values or (idx < 0).all():
+        if not len(values) or (idx < 0).all():
             continue
         kind = "vt" if col == 1 else "vn"
         if (idx < 0).any():
@@ -475,18 +529,19 @@ def _read_obj_attributes(p: Path, faces: np.ndarray) -> MeshAttributes:
                 f"{p}: face {row} references '{kind}' {int(idx[row].max()) + 1} but the file has {len(values)} "
                 f"'{kind}' lines; the face indices do not match the {name} list"
             )
-        out[name], out[name + "_faces"] = np.asarray(values, dtype=np.float64).reshape(-1, width), idx
+        out[name], out[name + "_faces"] = values, idx
     return MeshAttributes(out["uv"], out["uv_faces"], out["normal"], out["normal_faces"])
 
 
 def _load(path: str | os.PathLike, y_up: bool, attributes: bool) -> tuple[np.ndarray, np.ndarray, MeshAttributes]:
     p, ext = _check_path(path, writing=False)
     kwargs: dict[str, Any] = {"process": False}
-    plain = None
+    plain, data = None, b""
     if ext == ".obj":
-        _check_obj_lines(p)
+        data = _read_file(p)
+        _check_obj_lines(p, data)
         kwargs.update(maintain_order=True, skip_materials=True)
-        plain = _read_obj_fast(p.read_bytes())
+        plain = _read_obj_fast(data)
     if plain is not None:
         loaded, (vertices, faces) = None, plain
         if faces.size and faces.max() >= len(vertices):
@@ -524,7 +579,7 @@ def _load(path: str | os.PathLike, y_up: bool, attributes: bool) -> tuple[np.nda
     v, f = validate_mesh(vertices, faces, name=str(p))
     attrs = MeshAttributes()
     if attributes and ext == ".obj":
-        attrs = _read_obj_attributes(p, f)
+        attrs = _read_obj_attributes(data, p, f)
     elif attributes and ext != ".stl":
         uv = getattr(getattr(loaded, "visual", None), "uv", None)
         if uv is not None and np.shape(uv) == (len(v), 2) and np.isfinite(uv).all():

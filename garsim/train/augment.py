@@ -8,8 +8,9 @@ full surface) and carries the ground truth and the prior through the same baryce
 nearest original vertex: the same simulated surfaces, sampled by another mesh. The body is unchanged.
 
 A variant is a pure function of (seed, the sample's name, the variant number): it does not depend on the order of
-the training list, and the same run rebuilds the same variants. ``RemeshAugmented`` builds each one on first use;
-``GraphDataset`` then caches its graph like the originals'. Validation is never augmented (only training samples
+the training list, and the same run rebuilds the same variants. ``RemeshAugmented`` builds one whenever it is
+indexed and keeps none: ``GraphDataset`` caches each sample's graph (the one copy a run holds), so a variant is built
+once per run. Validation is never augmented (only training samples
 are wrapped, by ``garsim train --remesh-copies N``).
 """
 
@@ -85,7 +86,8 @@ def remesh_variant(
 
 
 class RemeshAugmented(Sequence[Sample]):
-    """The training samples followed by ``copies`` remeshed variants of each source, built on first use and kept.
+    """The training samples followed by ``copies`` remeshed variants of each source, built when indexed (not kept:
+    ``GraphDataset`` caches their graphs).
 
     ``sources`` are the full-resolution samples to remesh (any sequence; one variant set per source) and
     ``min_vertices`` their low level's vertex counts (None: ``LOW_FRACTION`` x full). Index ``i < len(originals)``
@@ -110,7 +112,6 @@ class RemeshAugmented(Sequence[Sample]):
         self.seed = int(seed)
         self.min_vertices = list(min_vertices) if min_vertices is not None else [None] * len(sources)
         self.max_fraction = max_fraction
-        self._variants: dict[int, Sample] = {}
 
     def __len__(self) -> int:
         return len(self.originals) + len(self.sources) * self.copies
@@ -128,12 +129,8 @@ class RemeshAugmented(Sequence[Sample]):
             raise IndexError(f"index {i} out of range for {len(self)} samples")
         if i < len(self.originals):
             return self.originals[i]
-        got = self._variants.get(i)
-        if got is None:
-            s, v = divmod(i - len(self.originals), self.copies)
-            got = remesh_variant(self.sources[s], v, self.seed, self.min_vertices[s], self.max_fraction)
-            self._variants[i] = got
-        return got
+        s, v = divmod(i - len(self.originals), self.copies)
+        return remesh_variant(self.sources[s], v, self.seed, self.min_vertices[s], self.max_fraction)
 
 
 def remesh_augmented(
