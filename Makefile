@@ -29,8 +29,8 @@ test-all: $(STAMP)
 
 # The results report (docs/results.md and its figures) from the dataset, the model and its training run (when
 # RUN exists; otherwise docs/training_curve.png is kept):
-#   make results DATA=~/garsim-data/v2 RUN=~/garsim-runs/v1 MODEL=garsim/weights
-DATA ?= $(HOME)/garsim-data/v2
+#   make results DATA=~/garsim-data/v3 RUN=~/garsim-runs/v1 MODEL=garsim/weights
+DATA ?= $(HOME)/garsim-data/v3
 RUN ?= $(HOME)/garsim-runs/v1
 MODEL ?= garsim/weights
 EXTERNAL := ../shared/external-eval/check.py

@@ -1,11 +1,11 @@
 """The paper's experiments on a generated dataset, one command each (``garsim.eval.studies``): every variant is
 trained under one protocol (data, split, schedule, seed) and scored per garment family on the test split.
 
-    .venv/bin/python examples/experiments.py heads --data ~/garsim-data/v2 --out runs/studies --budget 30
-    .venv/bin/python examples/experiments.py generalisation --data ~/garsim-data/v2 --out runs/studies --budget 30
-    .venv/bin/python examples/experiments.py resolution --data ~/garsim-data/v2 --out runs/studies --budget 30
-    .venv/bin/python examples/experiments.py scaling --data ~/garsim-data/v2 --out runs/studies --budget 30
-    .venv/bin/python examples/experiments.py corrections --data ~/garsim-data/v2 --out runs/studies --model DIR
+    .venv/bin/python examples/experiments.py heads --data ~/garsim-data/v3 --out runs/studies --budget 30
+    .venv/bin/python examples/experiments.py generalisation --data ~/garsim-data/v3 --out runs/studies --budget 30
+    .venv/bin/python examples/experiments.py resolution --data ~/garsim-data/v3 --out runs/studies --budget 30
+    .venv/bin/python examples/experiments.py scaling --data ~/garsim-data/v3 --out runs/studies --budget 30
+    .venv/bin/python examples/experiments.py corrections --data ~/garsim-data/v3 --out runs/studies --model DIR
 
 Each writes <out>/<study>.json and <out>/<study>.md (its tables, headed by the command). Trained models go to
 <out>/models/<key>/, keyed by what decides them, so a variant several studies share (the base model trained on

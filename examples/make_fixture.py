@@ -2,7 +2,7 @@
 garment family and construction, every canonical pose, one record with physical fabric values and one
 complete paired-fabric group (last settled state of each).
 
-Run: .venv/bin/python examples/make_fixture.py --data ~/garsim-data/v2 [--out tests/fixtures/dataset_v2]
+Run: .venv/bin/python examples/make_fixture.py --data ~/garsim-data/v3 [--out tests/fixtures/dataset_v2]
 """
 
 from __future__ import annotations

@@ -2,7 +2,7 @@
 test / ood tables of `garsim eval --refine --out`, the paired-fabric agreement, the external check (raw network
 and API defaults, from check.py --json) and error maps of test samples (prior, prediction, ground truth).
 
-Run: .venv/bin/python examples/make_report.py --run ~/garsim-runs/v1 --data ~/garsim-data/v2 \
+Run: .venv/bin/python examples/make_report.py --run ~/garsim-runs/v1 --data ~/garsim-data/v3 \
     --results docs/results.json --external docs/external_default.json docs/external_raw.json
 """
 

@@ -832,7 +832,11 @@ def build_parser() -> argparse.ArgumentParser:
         p.add_argument("--max-vertices", type=int, help="garment resolution, upper end"), *gen, "max_vertices"
     )
     _config_default(
-        p.add_argument("--targets", type=int, help="chained target poses per job, each settled"),
+        p.add_argument(
+            "--targets",
+            type=int,
+            help="target poses per job, chained, each settled (a chained state depends on the path: 1)",
+        ),
         *gen,
         "targets_per_job",
     )

@@ -283,3 +283,20 @@ def test_a_garment_the_validator_refuses_is_a_named_rejection(tmp_path, monkeypa
     with pytest.raises(SimulationRejected) as err:
         gen.simulate_job(plan_jobs(cfg)[0], cfg)
     assert err.value.reason == gen.REJECT_INVALID_GARMENT and "zero area" in err.value.detail
+
+
+def test_settings_added_later_keep_older_folders_and_workers_refuse_changed_defaults(tmp_path, monkeypatch):
+    """Optional sim settings at their legacy value are left out of ``settings()`` (folders bound before they
+    existed still match); a worker whose effective settings differ from the folder's (code defaults changed
+    under a running pool) refuses with a retried error instead of mixing settings."""
+    legacy = dict(gen.OPTIONAL_SIM_SETTINGS)
+    cfg = GenerateConfig(out=tmp_path, num_train=1, num_test=0, num_ood=0, workers=1, sim=legacy)
+    assert not set(legacy) & set(cfg.settings()["sim"])
+    gen.check_settings(cfg)  # binds the folder
+    gen.check_settings(cfg)  # and matches again
+    with pytest.raises(ValueError, match="sim"):
+        gen.check_settings(GenerateConfig(out=tmp_path, num_train=1, sim={**legacy, "collide_every": 3}))
+    monkeypatch.setattr(gen, "simulate_job", lambda job, config: pytest.fail("must not simulate"))
+    other = GenerateConfig(out=tmp_path, num_train=1, num_test=0, num_ood=0, sim={**legacy, "collide_every": 3})
+    out = gen._run_one((plan_jobs(cfg)[0], other))
+    assert "settings differ" in out["error"]["error"]

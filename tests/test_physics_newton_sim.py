@@ -240,3 +240,29 @@ def test_one_fabric_drapes_alike_at_three_resolutions(anny_body):
         dist.append(1000 * mean_body_distance(v, can.vertices))
     print(dist)
     assert max(dist) - min(dist) < 3.0, dist
+
+
+def test_settling_phase_switches_iterations_and_damping_and_collision_runs_every_kth_substep(icosphere):
+    """A tiny patch above a sphere: the settle loop runs with ``settle_iterations`` / ``settle_damping`` and
+    restores the motion settings afterwards; collision detection runs on every ``collide_every``-th substep."""
+    from garsim.physics.newton_sim import ClothScene, _settle_loop
+
+    v, f = _grid_patch(4, z=1.05)
+    cfg = SimConfig(substeps=4, iterations=6, settle_iterations=2, damping=0.9, settle_damping=0.5, collide_every=2)
+    scene = ClothScene(v, f, np.zeros(len(v), bool), *icosphere, ["cotton"], cfg)
+    calls = []
+    collide = scene.pipeline.collide
+    scene.pipeline.collide = lambda *a: calls.append(1) or collide(*a)
+    seen = []
+    step = scene.solver.step
+    scene.solver.step = lambda *a: seen.append((scene.solver.iterations, scene.damping)) or step(*a)
+    scene.frame()
+    assert len(calls) == 2 and set(seen) == {(6, 0.9)}  # motion settings, 4 substeps / 2
+    seen.clear()
+    edges = unique_edges(f)
+    _settle_loop(scene, 2, cfg, edges, np.linalg.norm(v[edges[:, 1]] - v[edges[:, 0]], axis=1))
+    assert set(seen) == {(2, 0.5)} and (scene.solver.iterations, scene.damping) == (6, 0.9)
+    with pytest.raises(ValueError):
+        SimConfig(collide_every=0)
+    with pytest.raises(ValueError):
+        SimConfig(settle_damping=0.0)
