@@ -7,17 +7,21 @@ edges whose template rest length is >= 5 mm and that have a free end (an edge be
 vertices follows the skinning prior, which refine does not move): max and 99th percentile of the
 stretch ratio and its mean; vertices inside the body (winding number) and edges whose segment meets the
 body surface, of all and of the free ones (pinned vertices follow the skinning prior, inside the body
-or not); and refine's own CPU time per frame (one thread, a new body pose every frame). Issue 12's sequence
-figures come from the same runs: frame-to-frame jitter (``eval.metrics.jitter_mm``) of the prior, the raw
+or not); and refine's own CPU time per frame (one thread, a new body pose every frame), of the first and of the
+second of ``drape_sequence``'s passes (after the temporal smoothing, with the first's ``RefineMemo``). Issue 12's
+sequence figures come from the same runs: frame-to-frame jitter (``eval.metrics.jitter_mm``) of the prior, the raw
 network and the refined drape, and ``drape_sequence``'s frames per second with warm caches (wall clock,
 one thread).
 
 Usage: python examples/refine_walk.py [--model DIR] [--vertices 600 2400] [--frames 30] [--out docs/refine.json]
+       [--against OLD_REFINE.py]   (its per-call times from the same run, on the same inputs)
 """
 
 from __future__ import annotations
 
 import argparse
+import importlib.util
+import inspect
 import json
 import time
 from pathlib import Path
@@ -25,14 +29,23 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from garsim.api import GarSim
+from garsim.api import GarSim, SequenceConfig, smooth_corrections
 from garsim.bodies.anny import AnnyBody
 from garsim.bodies.poses import batched_matrices, motion, stack_poses
 from garsim.demo import DEMO_GARMENTS, _build_garment
 from garsim.eval.metrics import jitter_mm
-from garsim.geometry.inside import InsideTester
+from garsim.geometry.inside import InsideTester, obstacle
 from garsim.geometry.mesh import edge_lengths, unique_edges
-from garsim.refine import refine
+from garsim.refine import RefineMemo, refine
+
+
+def load_refine(path: Path):
+    """The ``refine`` function of another copy of garsim/refine.py."""
+    spec = importlib.util.spec_from_file_location("other_refine", path)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module.refine
+
 
 MIN_REST = 0.005  # m: shorter (seam) edges are left out of the stretch figures, as the issue asks
 
@@ -64,18 +77,40 @@ def frame_figures(frames: np.ndarray, garment, targets: np.ndarray, faces: np.nd
 
 
 def refine_ms(
-    raw: np.ndarray, garment, targets: np.ndarray, faces: np.ndarray, fabric: str, prior: np.ndarray
-) -> float:
-    """Median CPU ms of refine per frame (the raw frame on its own pose with the prior as its fallback, as the
-    API calls it)."""
+    raw: np.ndarray, garment, targets: np.ndarray, faces: np.ndarray, fabric: str, prior: np.ndarray, impls: dict
+) -> dict[str, tuple[float, float]]:
+    """Median CPU ms of refine per frame, as ``drape_sequence`` calls it, of each implementation in ``impls`` (name
+    -> refine function), interleaved frame by frame: the first pass (the raw frame on its own pose with the prior as
+    its fallback), then the second (the first pass's frames with their correction smoothed over time, each frame
+    with its first pass's ``RefineMemo`` where the implementation takes one). Before each timed call the obstacle is
+    moved to another pose, so that every call refits it as in a sequence."""
     kw = {"pinned": garment.pinned}
-    refine(raw[0], garment.vertices, garment.faces, targets[0], faces, fabric, fallback=prior[0], **kw)  # warm-up
-    times = []
-    for x, body, fb in zip(raw[1:], targets[1:], prior[1:]):
+    tpl, gf = garment.vertices, garment.faces
+    memos = {name: [RefineMemo() for _ in raw] for name in impls}
+    first = {name: [] for name in impls}
+    times = {name: ([], []) for name in impls}
+
+    def timed(name: str, x: np.ndarray, t: int, which: int) -> np.ndarray:
+        extra = {"memo": memos[name][t]} if "memo" in inspect.signature(impls[name]).parameters else {}
+        obstacle(targets[t - 1], faces)  # another pose: this call refits the obstacle, as in a sequence
         t0 = time.process_time()
-        refine(x, garment.vertices, garment.faces, body, faces, fabric, fallback=fb, **kw)
-        times.append(1e3 * (time.process_time() - t0))
-    return float(np.median(times))
+        out = impls[name](x, tpl, gf, targets[t], faces, fabric, fallback=prior[t], **kw, **extra)
+        times[name][which].append(1e3 * (time.process_time() - t0))
+        return out
+
+    for name in impls:  # warm-up (kernels, per-garment caches)
+        impls[name](raw[0], tpl, gf, targets[0], faces, fabric, fallback=prior[0], **kw)
+    for t, x in enumerate(raw):
+        for name in impls:
+            first[name].append(timed(name, x, t, 0))
+    again = {}
+    for name in impls:
+        again[name] = smooth_corrections(np.stack(first[name]), prior, SequenceConfig.smoothing)
+        again[name][:, garment.pinned] = prior[:, garment.pinned]
+    for t in range(len(raw)):
+        for name in impls:
+            timed(name, again[name][t], t, 1)
+    return {name: (float(np.median(a)), float(np.median(b))) for name, (a, b) in times.items()}
 
 
 def timed_sequence(sim: GarSim, canonical, targets: np.ndarray, mesh, **kw) -> tuple[np.ndarray, float]:
@@ -89,8 +124,9 @@ def timed_sequence(sim: GarSim, canonical, targets: np.ndarray, mesh, **kw) -> t
     return frames, len(targets) / (time.perf_counter() - t0)
 
 
-def main(vertices: list[int], frames: int, out: Path, model: str | None = None) -> dict:
+def main(vertices: list[int], frames: int, out: Path, model: str | None = None, against: Path | None = None) -> dict:
     torch.set_num_threads(1)
+    against = {"against": load_refine(against)} if against else {}
     body = AnnyBody({})
     canonical = (body.canonical().vertices, body.faces)
     targets = body.pose_batch(batched_matrices(stack_poses(motion("walk", frames))))[0]
@@ -106,13 +142,17 @@ def main(vertices: list[int], frames: int, out: Path, model: str | None = None) 
             raw, raw_fps = timed_sequence(raw_sim, canonical, targets, mesh, **kw)
             refined, fps = timed_sequence(sim, canonical, targets, mesh, **kw)
             skinned = prior.drape_sequence(canonical, targets, mesh, **kw)
+            ms = refine_ms(raw, g, targets, body.faces, fabric, skinned, {"refine": refine, **against})
+            first_ms, second_ms = ms["refine"]
             entry = {
                 "vertices": int(len(g.vertices)),
                 "fabric": fabric,
                 "construction": construction,
                 "raw": frame_figures(raw, g, targets, body.faces),
                 "refined": frame_figures(refined, g, targets, body.faces),
-                "refine_cpu_ms_per_frame": refine_ms(raw, g, targets, body.faces, fabric, skinned),
+                "refine_cpu_ms_per_frame": first_ms,
+                "refine_second_pass_cpu_ms_per_frame": second_ms,
+                **({"against_cpu_ms_per_frame": ms["against"]} if against else {}),
                 "moved_mm_mean": 1000.0 * float(np.linalg.norm(refined - raw, axis=2).mean()),
                 "jitter_mm": {"prior": jitter_mm(skinned), "raw": jitter_mm(raw), "refined": jitter_mm(refined)},
                 "sequence_fps": {"raw": raw_fps, "refined": fps},
@@ -125,7 +165,9 @@ def main(vertices: list[int], frames: int, out: Path, model: str | None = None) 
                 f"{b['mean_stretch']:.3f}, inside {a['inside_pct']:.2f} -> {b['inside_pct']:.2f} % "
                 f"(free {b['inside_free_pct']:.2f}), through {a['edges_through_pct']:.2f} -> "
                 f"{b['edges_through_pct']:.2f} % (free {b['edges_through_free_pct']:.2f}), "
-                f"refine {entry['refine_cpu_ms_per_frame']:.1f} ms/frame, jitter prior/raw/refined "
+                f"refine {first_ms:.1f} + {second_ms:.1f} ms/frame"
+                + (f" (against {ms['against'][0]:.1f} + {ms['against'][1]:.1f})" if against else "")
+                + ", jitter prior/raw/refined "
                 f"{'/'.join(f'{v:.2f}' for v in entry['jitter_mm'].values())} mm/frame², {fps:.0f} fps",
                 flush=True,
             )
@@ -140,5 +182,11 @@ if __name__ == "__main__":
     p.add_argument("--frames", type=int, default=30)
     p.add_argument("--out", type=Path, default=Path("docs/refine.json"))
     p.add_argument("--model", help="a trained model folder (default: the shipped model)")
+    p.add_argument(
+        "--against",
+        type=Path,
+        help="another garsim/refine.py (e.g. git show HEAD:garsim/refine.py > /tmp/old_refine.py): its two passes are "
+        "timed in the same run, frame by frame with this one's (against_cpu_ms_per_frame: first, second)",
+    )
     args = p.parse_args()
-    main(args.vertices, args.frames, args.out, args.model)
+    main(args.vertices, args.frames, args.out, args.model, args.against)

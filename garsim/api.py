@@ -305,13 +305,19 @@ def _coarse_copy(sample: Sample, max_vertices: int) -> tuple[Garment, Barycentri
 
 
 def postprocess(
-    pred: np.ndarray, sample: Sample, collision_margin: float | None = 0.002, refine: bool = True
+    pred: np.ndarray,
+    sample: Sample,
+    collision_margin: float | None = 0.002,
+    refine: bool = True,
+    memo: Any = None,
 ) -> np.ndarray:
     """The API's post-process of a raw prediction: physical refinement (``garsim.refine``) or, with
     ``refine=False``, the push-out along the soft anchor's normal, to ``collision_margin`` metres outside the
     target body (None: the raw prediction). The sample's pinned vertices follow the prior exactly, before the
     refinement (which never moves them, so their edges are refined against where they end) and after; the
-    refinement also takes the prior as its ``fallback`` for vertices the network put deep inside the body."""
+    refinement also takes the prior as its ``fallback`` for vertices the network put deep inside the body, through
+    the body or on torn edges. ``memo`` (a ``garsim.refine.RefineMemo``, optional): kept by the caller between two
+    post-processes of one sample, it makes the second refinement cheaper (same result)."""
     pred = np.array(pred, dtype=np.float32)
     pred[sample.pinned] = sample.prior[sample.pinned]
     if collision_margin is not None and refine:
@@ -328,6 +334,7 @@ def postprocess(
             pinned=sample.pinned,
             margin=collision_margin,
             fallback=sample.prior,
+            memo=memo,
         )
     elif collision_margin is not None:
         normals = cached_vertex_normals(sample.body_target, sample.body_faces)
@@ -534,12 +541,19 @@ class GarSim:
             priors = np.stack([s.prior for s in samples])
             if sigma > 0 and len(raw) > 1:
                 raw = list(smooth_corrections(np.stack(raw), priors, sigma))
-            done = []
-            for sample, pred in zip(samples, raw):
-                done.append(self.finish(pred, sample))
-                bar.update()
             refined = self.model is not None and self.refine and self.collision_margin is not None
-            if sigma > 0 and len(done) > 1 and refined:  # the refinement's own frame-to-frame changes, smoothed
+            twice = refined and sigma > 0 and len(samples) > 1
+            memos: list = [None] * len(samples)
+            if twice:  # each frame's first refinement leaves its distance queries to its second (garsim.refine)
+                from garsim.refine import RefineMemo
+
+                memos = [RefineMemo() for _ in samples]
+            done = []
+            margin = self.collision_margin
+            for sample, pred, memo in zip(samples, raw, memos):
+                done.append(self.finish(pred, sample) if memo is None else postprocess(pred, sample, margin, memo=memo))
+                bar.update()
+            if twice:  # the refinement's own frame-to-frame changes, smoothed
                 again = smooth_corrections(np.stack(done), priors, sigma)
-                done = [self.finish(pred, sample) for sample, pred in zip(samples, again)]
+                done = [postprocess(p, s, margin, memo=m) for s, p, m in zip(samples, again, memos)]
         return np.stack([from_internal(f, up, units).astype(np.float32) for f in done])

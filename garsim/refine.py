@@ -15,13 +15,20 @@ gets wrong and a viewer notices, and leaves everything else exactly where the ne
     weight from the fabric's bending length, so a stiff fabric lifts its neighbours a little with a
     pushed vertex. A valid drape has no correction, so this never moves it;
 (e) optional ``fallback`` (the API passes the skinning prior): before (a)-(d), a mobile vertex the prediction
-    put deeper than ``FALLBACK_DEPTH`` inside the obstacle is blended towards the fallback, with a weight that
-    rises smoothly with depth (0 at ``FALLBACK_DEPTH``, 1 at ``FALLBACK_DEPTH`` + ``FALLBACK_RAMP``), is
-    spread over a few rings of the mesh (so a patch moves as a whole and fades out at its border) and is
-    scaled down where the fallback itself is inside (0 once it is ``FALLBACK_DEPTH`` inside). Pushed out to
-    its own nearest surface point, a patch sunk past a limb's centre line would wrap the limb's far side
-    (stretched ~R / (R - depth), neighbours on opposite sides, edges through it); the prior follows the limb
-    by skinning, on the right side of it. A valid drape has nothing that deep, so this never moves it.
+    got wrong in a way (a)-(c) would make worse is blended towards the fallback: deeper than ``FALLBACK_DEPTH``
+    inside the obstacle, itself or on an edge through it (an edge's depth is that of its deepest sample: a limb
+    through the cloth between two shallow vertices), with a weight that rises smoothly with the depth (0 at
+    ``FALLBACK_DEPTH``, 1 at ``FALLBACK_DEPTH`` + ``FALLBACK_RAMP``), or on a torn edge (over ``FALLBACK_STRETCH``
+    x its rest length, weight 1 at ``FALLBACK_STRETCH`` + ``FALLBACK_STRETCH_RAMP``); the weight is spread over a
+    few rings of the mesh (so a patch moves as a whole and fades out at its border). Pushed out to its own
+    nearest surface point, a patch sunk past a limb's centre line wraps the limb's far side (stretched
+    ~R / (R - depth), neighbours on opposite sides, edges through it); a sleeve wall with the wrist through it
+    is pushed out on both sides of the wrist; a torn patch pulled back by (a) is dragged straight across the
+    limb between its vertices. The prior follows the limbs by skinning, on the right side of them, even where
+    it is itself inside the body (skinning sinks cloth into the torso at the armpit and between the thighs):
+    from there (b) pushes it out to the right side, so its own depth does not reduce the weight. On the walk
+    cycle this is what brings the sleeves' armpits and cuffs within the bounds (t-shirt max stretch 5.9 -> 1.1,
+    long-sleeve 3.7 -> 1.2). A valid drape has nothing that deep or torn, so this never moves it.
 
 Algorithm: position-based dynamics with Jacobi sweeps (order-independent, so the result does not
 depend on vertex order), averaged by the number of active constraints per vertex (counted smoothly: a
@@ -47,14 +54,22 @@ by a ray query along it. The BVH and the adjacency the pseudo-normals need are b
 array; a new pose refits the BVH (~0.5 ms for Anny's 27k triangles), so the per-pose cost does not
 depend on the garment and nothing is approximated away from it.
 
-The sweeps and the queries are warp kernels on the CPU device, which runs one thread in a fixed
-order: the accumulations, and so the results, are deterministic. A refit BVH gives the answers of one
-built for the pose, up to rounding where a closest point lies on an edge shared by two triangles.
+The sweeps, the queries, the bending term and the fallback blend are warp kernels on the CPU device, which runs
+one thread in a fixed order: the accumulations, and so the results, are deterministic. A refit BVH gives the
+answers of one built for the pose, up to rounding where a closest point lies on an edge shared by two triangles.
+
+A second call on the same frame (``drape_sequence`` refines every frame again after smoothing the refined
+frames over time: a near-valid drape a few millimetres from the first result) can start from the first one's
+queries (:class:`RefineMemo`): the 1-Lipschitz bound then holds from the first call's query points, so only the
+vertices that may be within ``margin`` + ``BAND`` are queried (the query of every vertex without a radius is
+the costliest step of a call), with the result of a call without the memo.
 
 Limits: the obstacle should be closed and outward-oriented for the sign to be right (zero-area
 triangles are skipped by the search); where it intersects itself (a posed body's armpits or thighs) the
 nearest surface can be that of the other part. Stretch and contact can conflict (a pinned vertex inside
-the body, a garment too small for the body, cloth tangled with a limb): contact wins.
+the body, a garment too small for the body, cloth tangled with a limb): contact wins. Pinned vertices that the
+prior stretched apart (a long-sleeve's neckline) leave the edges between them and their neighbours over the
+limit whatever the sweeps do: such a garment always runs ``MAX_ROUNDS`` rounds.
 """
 
 from __future__ import annotations
@@ -87,12 +102,18 @@ the surface too (an edge that starts to meet the surface jumps by at most this: 
 RELAXATION = 1.0
 """Over-relaxation of the averaged Jacobi stretch sweeps (1 = plain averaging)."""
 CHEBYSHEV_RHO = 0.95
-"""Spectral radius estimate of the Chebyshev acceleration (0 = plain Jacobi; 0.99 converges a stretched
-sleeve faster but overshoots into compression and oscillates against contacts)."""
+"""Spectral radius estimate of the Chebyshev acceleration (0 = plain Jacobi). 0.98 leaves the walk cycle's 99th
+percentile of the stretch 0.01-0.03 lower in the same four rounds but overshoots: a coarse settled drape whose
+long edges cut the body moves twice as far (test_api_stability); 0.99 also oscillates against contacts."""
 FALLBACK_DEPTH = 0.01
 """m: a mobile vertex deeper than this inside the obstacle starts to be blended towards the ``fallback``."""
 FALLBACK_RAMP = 0.01
 """m: ... and is blended fully (weight 1) this much deeper (a smoothstep in between)."""
+FALLBACK_STRETCH = 2.0
+"""x rest length: a mobile vertex with an edge longer than this is blended towards the ``fallback`` too (a torn
+patch: projecting its edges back drags its vertices straight across the limb between them) ..."""
+FALLBACK_STRETCH_RAMP = 1.0
+"""... fully once the edge is this much (x rest length) longer (a smoothstep in between)."""
 FALLBACK_PASSES = 4
 """Passes that spread the fallback weight over the mesh (w = max(w, mean of w over the closed one-ring))."""
 _STRETCH_TOL = 1e-3  # relative: an edge within limit * (1 + this) counts as satisfied
@@ -133,22 +154,24 @@ def _kernels() -> SimpleNamespace:
         fresh: wp.array(dtype=wp.int32),
     ):
         """Each vertex's signed distance ``d`` (exact, or a lower bound >= ``band``) and whether it has a
-        contact half-space (``active``: exact, mobile, within ``band``); (xq, dq, cq, nq) is its last exact
-        query. ``first``: query every vertex without a radius."""
+        contact half-space (``active``: exact, mobile, within ``band``); (xq, dq) is its last exact query (cq, nq
+        too where it was within ``band``). ``first``: 0, query the vertices that moved and may be within ``band``;
+        1, query every vertex without a radius; 2 (a warm start: (xq, dq) from an earlier call on the same obstacle
+        pose), query every vertex that may be within ``band``; with ``first`` != 0 every edge is tested again."""
         i = wp.tid()
         fresh[i] = 0
-        if first == 1 or wp.length(x[i] - xs[i]) > f64(0.0):  # moved since the last edge tests (sample_state)
+        if first != 0 or wp.length(x[i] - xs[i]) > f64(0.0):  # moved since the last edge tests (sample_state)
             fresh[i] = 1
             xs[i] = x[i]
         moved = wp.length(x[i] - xq[i])
-        if first == 1 or moved > f64(0.0):
+        if first != 0 or moved > f64(0.0):
             bound = dq[i] - moved  # the distance is 1-Lipschitz
-            if first == 0 and bound >= band:
+            if first != 1 and bound >= band:
                 d[i] = bound
                 active[i] = 0
                 return
             radius = f64(UNBOUNDED)
-            if first == 0:
+            if first != 1:
                 radius = wp.abs(dq[i]) + moved
             ok, s, cp, n = signed_closest(mesh, verts, faces, face_adj, vf_start, vf_face, x[i], radius)
             xq[i] = x[i]
@@ -180,6 +203,7 @@ def _kernels() -> SimpleNamespace:
         listed: wp.array(dtype=wp.int32),
         count: wp.array(dtype=wp.int32),
         fresh: wp.array(dtype=wp.int32),
+        depth: wp.array(dtype=wp.float64),
     ):
         """Whether edge e meets the surface (``hit``: an endpoint inside, or the segment crosses it), and if
         so the half-space of each of its samples nearer than ``keep`` (appended to ``listed`` as
@@ -192,6 +216,7 @@ def _kernels() -> SimpleNamespace:
         seg = x[j] - x[i]
         length = wp.length(seg)
         hit[e] = 0
+        depth[e] = f64(UNBOUNDED)
         if d[i] + d[j] - length > f64(0.0):
             return
         if (mobile[i] == f64(0.0) and d[i] < f64(0.0)) or (mobile[j] == f64(0.0) and d[j] < f64(0.0)):
@@ -207,6 +232,8 @@ def _kernels() -> SimpleNamespace:
                 p = (f64(1.0) - t) * x[i] + t * x[j]
                 radius = wp.max(-bound, keep)  # nothing within it: the sample is farther out than keep
                 ok, s, cp, n = signed_closest(mesh, verts, faces, face_adj, vf_start, vf_face, p, radius)
+                if ok == 1:
+                    depth[e] = wp.min(depth[e], s)
                 if ok == 1 and s < keep:
                     close[e, k] = cp
                     normal[e, k] = n
@@ -271,10 +298,10 @@ def _kernels() -> SimpleNamespace:
         > 0 each sweep ends with the Chebyshev semi-iterative step (Wang 2015) from the iterate before
         (``chebyshev``: the last weight and the number of sweeps so far)."""
         n = x.shape[0]
+        if rho > f64(0.0):
+            for i in range(n):
+                current[i] = x[i]  # the iterate this sweep starts from (kept up to date by the last loop below)
         for _it in range(iterations):
-            if rho > f64(0.0):
-                for i in range(n):
-                    current[i] = x[i]
             for e in range(stretch_edges.shape[0]):
                 i = stretch_edges[e, 0]
                 j = stretch_edges[e, 1]
@@ -328,19 +355,109 @@ def _kernels() -> SimpleNamespace:
                 if w != f64(1.0):  # less momentum nearer a contact (continuous in the distance)
                     near = wp.clamp((d[i] - margin) / f64(BAND), f64(0.0), f64(1.0))
                     xi = xi + near * (w - f64(1.0)) * (xi - previous[i])
-                if rho > f64(0.0):
-                    previous[i] = current[i]
                 if v_active[i] == 1:
                     g = wp.dot(xi - v_close[i], v_normal[i]) - margin
                     if g < f64(0.0):
                         xi = xi - g * v_normal[i]
                 x[i] = xi
+                if rho > f64(0.0):
+                    previous[i] = current[i]
+                    current[i] = xi
+
+    @wp.func
+    def ramp(t: wp.float64) -> wp.float64:
+        """smoothstep: 3t^2 - 2t^3 of t clipped to [0, 1] (as garsim.geometry.proximity.smoothstep)."""
+        u = wp.clamp(t, f64(0.0), f64(1.0))
+        return u * u * (f64(3.0) - f64(2.0) * u)
+
+    @wp.kernel(enable_backward=False, module="unique")
+    def fallback_blend(
+        x: wp.array(dtype=wp.vec3d),
+        d: wp.array(dtype=wp.float64),
+        sample_edges: wp.array2d(dtype=wp.int32),
+        hit: wp.array(dtype=wp.int32),
+        edge_depth: wp.array(dtype=wp.float64),
+        stretch_edges: wp.array2d(dtype=wp.int32),
+        rest: wp.array(dtype=wp.float64),
+        edges: wp.array2d(dtype=wp.int32),
+        closed_inv_degree: wp.array(dtype=wp.float64),
+        mobile: wp.array(dtype=wp.float64),
+        prior: wp.array(dtype=wp.vec3d),
+        w: wp.array(dtype=wp.float64),
+        ring: wp.array(dtype=wp.float64),
+        previous: wp.array(dtype=wp.vec3d),
+        out: wp.array(dtype=wp.int32),
+    ):
+        """(e), one thread: the fallback weight ``w`` of :func:`fallback_weight` (a vertex's depth is the least of
+        its own and that of its edges through the obstacle), then x += w * mobile * (prior - x); out[1] = 1 if a
+        vertex moved."""
+        n = x.shape[0]
+        out[1] = 0
+        seeded = wp.int32(0)
+        for i in range(n):
+            w[i] = ramp((-d[i] - f64(FALLBACK_DEPTH)) / f64(FALLBACK_RAMP))
+            if w[i] > f64(0.0):
+                seeded = 1
+        for e in range(hit.shape[0]):
+            if hit[e] == 1:
+                v = ramp((-edge_depth[e] - f64(FALLBACK_DEPTH)) / f64(FALLBACK_RAMP))
+                if v > f64(0.0):
+                    seeded = 1
+                    w[sample_edges[e, 0]] = wp.max(w[sample_edges[e, 0]], v)
+                    w[sample_edges[e, 1]] = wp.max(w[sample_edges[e, 1]], v)
+        for e in range(stretch_edges.shape[0]):
+            ratio = wp.length(x[stretch_edges[e, 1]] - x[stretch_edges[e, 0]]) / rest[e]
+            v = ramp((ratio - f64(FALLBACK_STRETCH)) / f64(FALLBACK_STRETCH_RAMP))
+            if v > f64(0.0):
+                seeded = 1
+                w[stretch_edges[e, 0]] = wp.max(w[stretch_edges[e, 0]], v)
+                w[stretch_edges[e, 1]] = wp.max(w[stretch_edges[e, 1]], v)
+        if seeded == 0:
+            return
+        for _pass in range(FALLBACK_PASSES):  # w = max(w, mean of w over the closed one-ring)
+            for i in range(n):
+                ring[i] = w[i]
+            for e in range(edges.shape[0]):
+                ring[edges[e, 0]] = ring[edges[e, 0]] + w[edges[e, 1]]
+                ring[edges[e, 1]] = ring[edges[e, 1]] + w[edges[e, 0]]
+            for i in range(n):
+                w[i] = wp.max(w[i], ring[i] * closed_inv_degree[i])
+        for i in range(n):
+            wi = w[i] * mobile[i]
+            if wi > f64(0.0):
+                x[i] = x[i] + wi * (prior[i] - x[i])
+                out[1] = 1
+            previous[i] = x[i]
+
+    @wp.kernel(enable_backward=False, module="unique")
+    def diffuse(
+        alpha: wp.float64,
+        x: wp.array(dtype=wp.vec3d),
+        x0: wp.array(dtype=wp.vec3d),
+        edges: wp.array2d(dtype=wp.int32),
+        mobile: wp.array(dtype=wp.float64),
+        inv_degree: wp.array(dtype=wp.float64),
+        ring: wp.array(dtype=wp.vec3d),
+    ):
+        """(d), one thread: x += alpha * (mean correction x - x0 of the one-ring - own correction) at each mobile
+        vertex (``ring``: scratch, left zero)."""
+        for e in range(edges.shape[0]):
+            i = edges[e, 0]
+            j = edges[e, 1]
+            ring[i] = ring[i] + (x[j] - x0[j])
+            ring[j] = ring[j] + (x[i] - x0[i])
+        for i in range(x.shape[0]):
+            if mobile[i] > f64(0.0):
+                x[i] = x[i] + alpha * mobile[i] * (ring[i] * inv_degree[i] - (x[i] - x0[i]))
+            ring[i] = wp.vec3d()
 
     return SimpleNamespace(
         vertex_state=vertex_state,
         sample_state=sample_state,
         violations=violations,
         sweeps=sweeps,
+        fallback_blend=fallback_blend,
+        diffuse=diffuse,
     )
 
 
@@ -351,8 +468,11 @@ def _kernels() -> SimpleNamespace:
 class _Constraints:
     """The edges of a garment, the stretch-limited ones with their limits, and the mobile vertices."""
 
-    def __init__(self, template: np.ndarray, faces: np.ndarray, pinned: np.ndarray, limit: float) -> None:
+    def __init__(
+        self, template: np.ndarray, faces: np.ndarray, pinned: np.ndarray, limit: float, key: tuple = ()
+    ) -> None:
         wp = quiet_warp()
+        self.key = key
         n = len(template)
         tpl = np.asarray(template, dtype=np.float64)
         self.edges = unique_edges(faces) if len(faces) else np.zeros((0, 2), dtype=np.int64)
@@ -363,6 +483,7 @@ class _Constraints:
         use = (rest > 1e-12) & moving
         self.stretch_edges = e[use]
         self.limit = limit * rest[use]
+        self.rest = rest[use]
         self.mean_edge = float(rest.mean()) if len(rest) else 0.0
         deg = np.bincount(e.ravel(), minlength=n).astype(np.float64)
         self.inv_degree = np.where(deg > 0, 1.0 / np.maximum(deg, 1.0), 0.0)
@@ -371,6 +492,10 @@ class _Constraints:
         self.wp_mobile = wp.array(self.mobile, dtype=wp.float64, device=_DEVICE)
         self.wp_stretch = wp.array(self.stretch_edges.astype(np.int32).reshape(-1, 2), dtype=wp.int32, device=_DEVICE)
         self.wp_limit = wp.array(self.limit, dtype=wp.float64, device=_DEVICE)
+        self.wp_rest = wp.array(self.rest, dtype=wp.float64, device=_DEVICE)
+        self.wp_closed_inv_degree = wp.array(self.closed_inv_degree, dtype=wp.float64, device=_DEVICE)
+        self.wp_edges = wp.array(e.astype(np.int32).reshape(-1, 2), dtype=wp.int32, device=_DEVICE)
+        self.wp_inv_degree = wp.array(self.inv_degree, dtype=wp.float64, device=_DEVICE)
         self.wp_moving = wp.array(self.moving_edges.astype(np.int32).reshape(-1, 2), dtype=wp.int32, device=_DEVICE)
         self.wp_ts = wp.array(np.asarray(EDGE_SAMPLES, dtype=np.float64), dtype=wp.float64, device=_DEVICE)
         self.buffers = _buffers(n, (len(self.moving_edges), len(EDGE_SAMPLES)))
@@ -396,12 +521,17 @@ def _buffers(n: int, samples: tuple[int, int]) -> dict[str, Any]:
         "current": (n, wp.vec3d),
         "previous": (n, wp.vec3d),
         "hit": (samples[0], wp.int32),
+        "s_depth": (samples[0], wp.float64),
         "s_close": (samples, wp.vec3d),
         "s_normal": (samples, wp.vec3d),
         "s_list": (samples[0] * samples[1], wp.int32),
         "s_count": (1, wp.int32),
         "chebyshev": (2, wp.float64),
-        "flag": (1, wp.int32),
+        "flag": (2, wp.int32),
+        "x0": (n, wp.vec3d),
+        "prior": (n, wp.vec3d),
+        "w": (n, wp.float64),
+        "ring": (n, wp.float64),
     }
     return {name: wp.zeros(shape, dtype=dtype, device=_DEVICE) for name, (shape, dtype) in kinds.items()}
 
@@ -411,7 +541,7 @@ _CONSTRAINTS = ContentCache(8, scope="garment")
 
 def _constraints(template: np.ndarray, faces: np.ndarray, pinned: np.ndarray, limit: float) -> _Constraints:
     key = content_key(np.asarray(template, dtype=np.float64), faces, pinned) + (limit,)
-    return _CONSTRAINTS.get(key, lambda: _Constraints(template, faces, pinned, limit))
+    return _CONSTRAINTS.get(key, lambda: _Constraints(template, faces, pinned, limit, key))
 
 
 # ----------------------------------------------------------------------------------------------------
@@ -453,6 +583,24 @@ def smoothing_weight(fabric: str | Fabric, edge_length: float) -> float:
 # the refinement
 
 
+class RefineMemo:
+    """What a :func:`refine` call learned about its result, for a later call on the same garment, obstacle pose and
+    margin: the points of its last exact closest-point queries and their signed distances (two (N,) arrays).
+
+    ``drape_sequence`` refines every frame twice (the second time after a temporal smoothing that moves the garment
+    by millimetres); given the first call's memo, the second one starts from these distances (the distance is
+    1-Lipschitz) and queries only the vertices that may have come within ``margin`` + ``BAND`` of the surface,
+    instead of every vertex without a radius (the costliest step of a call on a near-valid drape). Its result is
+    the one a call without the memo gives: every distance it uses below ``margin`` + ``BAND`` is exact either way.
+    A memo of another garment, pose or margin is ignored (and overwritten). Not thread-safe (one memo per frame).
+    """
+
+    def __init__(self) -> None:
+        self.key: tuple | None = None
+        self.xq: np.ndarray | None = None
+        self.dq: np.ndarray | None = None
+
+
 class _State:
     """The garment being refined and what the obstacle queries last said about its vertices and edge samples.
 
@@ -460,17 +608,31 @@ class _State:
     per garment, obstacle and margin (replaying a launch costs a tenth of packing its arguments again).
     """
 
-    def __init__(self, x: np.ndarray, obs: Obstacle, con: _Constraints, margin: float) -> None:
+    def __init__(
+        self, x: np.ndarray, obs: Obstacle, con: _Constraints, margin: float, memo: RefineMemo | None = None
+    ) -> None:
         self.con, self.margin, self.obs = con, margin, obs
         self.buf = con.buffers
         self.buf["x"].numpy()[:] = x
         self.buf["previous"].numpy()[:] = x
         self.buf["chebyshev"].zero_()
         self.cmd = self.commands(obs)
-        self.update(first=True)
+        self.memo_key = (con.key, obs.faces_key, obs.key, margin)
+        if memo is not None and memo.key == self.memo_key:
+            self.buf["xq"].numpy()[:] = memo.xq
+            self.buf["dq"].numpy()[:] = memo.dq
+            self.update(first=2)
+        else:
+            self.update(first=1)
+
+    def remember(self, memo: RefineMemo) -> None:
+        """Keep the last exact distance queries (points and signed distances) in ``memo`` for a later call."""
+        memo.key = self.memo_key
+        memo.xq = self.buf["xq"].numpy().copy()
+        memo.dq = self.buf["dq"].numpy().copy()
 
     def commands(self, obs: Obstacle) -> SimpleNamespace:
-        """The recorded launches of the four kernels on this garment's buffers (cached on the garment)."""
+        """The recorded launches of the kernels on this garment's buffers (cached on the garment)."""
         con, buf, margin = self.con, self.buf, self.margin
         if con.commands is not None and con.commands[0] is obs and con.commands[1] == margin:
             return con.commands[2]
@@ -498,6 +660,7 @@ class _State:
             buf["s_normal"],
             *listed,
             buf["fresh"],
+            buf["s_depth"],
         ]
         sweeps = [0, RELAXATION, CHEBYSHEV_RHO, margin, floor, x, con.wp_mobile, con.wp_stretch, con.wp_limit]
         sweeps += [con.wp_moving, con.wp_ts, *listed, buf["s_close"], buf["s_normal"], buf["v_active"]]
@@ -509,12 +672,23 @@ class _State:
                 k.violations, 1, [x, con.wp_stretch, con.wp_limit, con.wp_mobile, d, buf["hit"], margin, buf["flag"]]
             ),
             sweeps=record(k.sweeps, 1, sweeps),
+            fallback=record(
+                k.fallback_blend,
+                1,
+                [x, d, con.wp_moving, buf["hit"], buf["s_depth"], con.wp_stretch, con.wp_rest, con.wp_edges]
+                + [con.wp_closed_inv_degree, con.wp_mobile, buf["prior"], buf["w"], buf["ring"], buf["previous"]]
+                + [buf["flag"]],
+            ),
+            diffuse=record(
+                k.diffuse, 1, [0.0, x, buf["x0"], con.wp_edges, con.wp_mobile, con.wp_inv_degree, buf["acc"]]
+            ),
         )
         con.commands = (obs, margin, cmd)
         return cmd
 
-    def update(self, first: bool = False) -> None:
-        """Re-query the vertices that may have come near the surface, then the edges that may cross it."""
+    def update(self, first: int = 0) -> None:
+        """Re-query the vertices that may have come near the surface, then the edges that may cross it (``first``:
+        see the ``vertex_state`` kernel)."""
         self.cmd.vertex.set_param_by_name("first", int(first))
         self.cmd.vertex.launch()
         self.buf["s_count"].zero_()
@@ -531,34 +705,21 @@ class _State:
         self.cmd.sweeps.launch()
 
     def diffuse(self, x0: np.ndarray, alpha: float) -> None:
-        """(d): blend each mobile vertex's correction with its one-ring's mean correction, weight ``alpha``."""
-        con, x = self.con, self.buf["x"].numpy()
-        e, n = con.edges, len(x)
-        delta = x - x0
-        nb = np.stack(
-            [
-                np.bincount(e[:, 0], weights=delta[e[:, 1], k], minlength=n)
-                + np.bincount(e[:, 1], weights=delta[e[:, 0], k], minlength=n)
-                for k in range(3)
-            ],
-            axis=1,
-        )
-        x += (alpha * con.mobile)[:, None] * (nb * con.inv_degree[:, None] - delta)
+        """(d): blend each mobile vertex's correction from ``x0`` with its one-ring's mean one, weight ``alpha``."""
+        self.buf["x0"].numpy()[:] = x0
+        self.cmd.diffuse.set_param_by_name("alpha", float(alpha))
+        self.cmd.diffuse.launch()
 
     def fall_back(self, prior: np.ndarray) -> np.ndarray | None:
-        """Blend the mobile vertices deep inside the obstacle towards ``prior`` (see :func:`fallback_weight`);
-        returns the blended garment, or None (nothing moved) when no vertex is deeper than ``FALLBACK_DEPTH``."""
-        con = self.con
-        w = fallback_weight(self.buf["d"].numpy(), con.edges, con.closed_inv_degree) * con.mobile
-        if not w.any():
+        """Blend the mobile vertices that are deep inside the obstacle, on an edge deep through it or on a torn edge
+        towards ``prior`` (the ``fallback_blend`` kernel; :func:`fallback_weight` is its reference); returns the
+        blended garment, or None (nothing moved)."""
+        self.buf["prior"].numpy()[:] = prior
+        self.cmd.fallback.launch()
+        if not self.buf["flag"].numpy()[1]:
             return None
-        use = np.flatnonzero(w)
-        w[use] *= smoothstep((self.obs.query(prior[use])[0] + FALLBACK_DEPTH) / FALLBACK_RAMP)
-        x = self.buf["x"].numpy()
-        x += w[:, None] * (prior - x)
-        self.buf["previous"].numpy()[:] = x
         self.update()
-        return x.copy()
+        return self.x.copy()
 
     def project_contacts(self) -> bool:
         """Move every mobile vertex closer than the margin to it along its normal; False if there was none."""
@@ -574,12 +735,24 @@ class _State:
         return self.buf["x"].numpy()
 
 
-def fallback_weight(d: np.ndarray, edges: np.ndarray, closed_inv_degree: np.ndarray) -> np.ndarray:
+def fallback_weight(
+    d: np.ndarray,
+    edges: np.ndarray,
+    closed_inv_degree: np.ndarray,
+    torn_edges: np.ndarray | None = None,
+    torn_ratio: np.ndarray | None = None,
+) -> np.ndarray:
     """Weight (N,) in [0, 1] of the fallback at each vertex from its signed distance ``d`` (N,) to the obstacle:
-    0 above -``FALLBACK_DEPTH``, 1 below -(``FALLBACK_DEPTH`` + ``FALLBACK_RAMP``), a smoothstep between; then
-    ``FALLBACK_PASSES`` times w = max(w, mean of w over the vertex and its neighbours along ``edges``), so that a
-    patch moves as a whole and its border fades over a few rings. Continuous in ``d``; 0 where nothing is deep."""
+    0 above -``FALLBACK_DEPTH``, 1 below -(``FALLBACK_DEPTH`` + ``FALLBACK_RAMP``), a smoothstep between; at least
+    smoothstep((ratio - ``FALLBACK_STRETCH``) / ``FALLBACK_STRETCH_RAMP``) at both ends of each of ``torn_edges``
+    (E, 2) with its length ratio ``torn_ratio`` (E,); then ``FALLBACK_PASSES`` times w = max(w, mean of w over the
+    vertex and its neighbours along ``edges``), so that a patch moves as a whole and its border fades over a few
+    rings. Continuous in ``d`` and the ratios; 0 where nothing is deep or torn."""
     w = smoothstep((-np.asarray(d, np.float64) - FALLBACK_DEPTH) / FALLBACK_RAMP)
+    if torn_edges is not None and len(torn_edges):
+        wt = smoothstep((np.asarray(torn_ratio, np.float64) - FALLBACK_STRETCH) / FALLBACK_STRETCH_RAMP)
+        np.maximum.at(w, torn_edges[:, 0], wt)
+        np.maximum.at(w, torn_edges[:, 1], wt)
     if not w.any() or len(edges) == 0:
         return w
     n = len(w)
@@ -602,6 +775,7 @@ def refine(
     margin: float = 0.002,
     max_stretch: float | None = None,
     fallback: np.ndarray | None = None,
+    memo: RefineMemo | None = None,
 ) -> np.ndarray:
     """Project a predicted garment onto the stretch-limit and no-penetration constraints (see module doc).
 
@@ -609,9 +783,12 @@ def refine(
     lengths), ``faces`` (F, 3); ``body_vertices`` / ``body_faces`` any closed, outward-oriented
     triangle mesh as the obstacle; ``pinned`` (N,) bool vertices that never move; ``fallback`` (N, 3), optional,
     a garment on the right side of the obstacle's parts (the skinning prior): mobile vertices more than
-    ``FALLBACK_DEPTH`` inside the obstacle are first blended towards it (:func:`fallback_weight`, spread over the
+    ``FALLBACK_DEPTH`` inside the obstacle (themselves or on an edge through it) or on an edge torn over
+    ``FALLBACK_STRETCH`` x its rest length are first blended towards it (:func:`fallback_weight`, spread over the
     mesh so that a patch moves as a whole), where pushing them out to the nearest surface would wrap them
-    around the wrong side of a limb. Returns (N, 3) in
+    around the wrong side of a limb. ``memo``, optional (:class:`RefineMemo`): filled with this call's last distance
+    queries; given to a later call on the same garment, body pose and margin (a second pass over the same frame), it
+    spares that call the query of every vertex, with the same result. Returns (N, 3) in
     the garment's float dtype (float64 for integer input); a garment that violates nothing is returned
     unchanged.
     """
@@ -631,6 +808,8 @@ def refine(
         pin = np.asarray(pinned)
         if pin.shape != (n,) or pin.dtype != bool:
             raise ValueError(f"pinned must be a bool array of shape ({n},), got {pin.dtype} {pin.shape}")
+    if memo is not None and not isinstance(memo, RefineMemo):
+        raise ValueError(f"memo must be a garsim.refine.RefineMemo or None, got {type(memo).__name__}")
     if isinstance(iterations, bool) or not isinstance(iterations, (int, np.integer)) or iterations < 1:
         raise ValueError(f"iterations must be an integer >= 1, got {iterations!r}")
     if not isinstance(margin, (int, float, np.floating)) or not np.isfinite(margin) or margin < 0:
@@ -646,8 +825,10 @@ def refine(
         return np.array(x_in, dtype=out_dtype)
 
     x0 = np.asarray(x_in, dtype=np.float64)
-    state = _State(x0, obstacle(bv, bf), _constraints(tpl, f, pin, limit), float(margin))
+    state = _State(x0, obstacle(bv, bf), _constraints(tpl, f, pin, limit), float(margin), memo)
     if not state.violated():
+        if memo is not None:
+            state.remember(memo)
         return np.array(x_in, dtype=out_dtype)
 
     if fb is not None:
@@ -668,4 +849,6 @@ def refine(
         if not state.project_contacts():
             break
         state.update()
+    if memo is not None:
+        state.remember(memo)
     return state.x.astype(out_dtype)

@@ -290,8 +290,9 @@ class Obstacle:
     faces around each vertex, from which the queries compute the pseudo-normals of the features they hit.
     """
 
-    def __init__(self, faces: np.ndarray, num_vertices: int) -> None:
+    def __init__(self, faces: np.ndarray, num_vertices: int, faces_key: tuple = ()) -> None:
         wp = quiet_warp()
+        self.faces_key = faces_key  # the content key of the face array (with the vertex count)
         f = np.asarray(faces, dtype=np.int64)
         nf = len(f)
         # the face across each face edge (edge k opposite corner k); -1 on a boundary
@@ -365,7 +366,8 @@ def obstacle(body_vertices: np.ndarray, body_faces: np.ndarray) -> Obstacle:
     a new pose refits it, so use it before asking for another pose of the same faces."""
     f = np.asarray(body_faces, dtype=np.int64)
     n = len(body_vertices)
-    return _OBSTACLES.get(content_key(f) + (n,), lambda: Obstacle(f, n)).pose(body_vertices)
+    key = content_key(f) + (n,)
+    return _OBSTACLES.get(key, lambda: Obstacle(f, n, key)).pose(body_vertices)
 
 
 def _as_points(points: np.ndarray, what: str = "points") -> np.ndarray:
