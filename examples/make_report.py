@@ -22,7 +22,10 @@ from garsim.geometry.render import render_grid
 
 
 def _external_table(paths: list[Path]) -> str:
-    lines = ["| run | garment | n | prior mm | pred mm | ratio | coll. % | inside % | edges through % |", "|---|" * 9]
+    lines = [
+        "| run | garment | n | prior mm | pred mm | ratio | coll. % | inside % | edges through % |",
+        "|" + "---|" * 9,
+    ]
     for path in paths:
         summary = json.loads(path.read_text())["summary"]
         for kind, s in summary.items():
