@@ -187,8 +187,10 @@ class Scene:
             if pinned.strip().lower() != "auto":
                 raise ValueError(f"pinned must be 'auto', vertex indices or a boolean mask, got {pinned!r}")
             pinned = auto_pinned(g, gf)
-        mask = _pinned_mask(pinned, len(g))
-        return cls(bc, bf, g, gf, mask, fabric_name, fabric_values, garment_type, up, units)
+        arrays = (bc, np.array(bf), g, np.array(gf), np.array(_pinned_mask(pinned, len(g))))  # the scene's own copies
+        for a in arrays:
+            a.flags.writeable = False  # per-scene set-up (Scene.prior) is computed once from them
+        return cls(*arrays, fabric_name, fabric_values, garment_type, up, units)
 
     def target_vertices(self, body_target: Any) -> np.ndarray:
         """A target body (a mesh, or an array of vertices on the canonical body's faces) in garsim's frame; it must
@@ -406,11 +408,12 @@ class GarSim:
         """The network's garment for a prepared sample before any post-process (the prior when there is no model)."""
         return np.array(sample.prior, dtype=np.float32) if self.model is None else self._network(sample)
 
-    def finish(self, pred: np.ndarray, sample: Sample) -> np.ndarray:
-        """This GarSim's post-process of a raw garment (:func:`postprocess`; none for the bare prior)."""
+    def finish(self, pred: np.ndarray, sample: Sample, memo: Any = None) -> np.ndarray:
+        """This GarSim's post-process of a raw garment (:func:`postprocess`, with its optional refine ``memo``; none
+        for the bare prior)."""
         if self.model is None and not self.refine:
             return np.array(pred, dtype=np.float32)
-        return postprocess(pred, sample, self.collision_margin, self.refine)
+        return postprocess(pred, sample, self.collision_margin, self.refine, memo=memo)
 
     def predict(self, sample: Sample) -> np.ndarray:
         """The model's garment for a prepared sample (the prior when there is no model), post-processed."""
@@ -549,11 +552,10 @@ class GarSim:
 
                 memos = [RefineMemo() for _ in samples]
             done = []
-            margin = self.collision_margin
             for sample, pred, memo in zip(samples, raw, memos):
-                done.append(self.finish(pred, sample) if memo is None else postprocess(pred, sample, margin, memo=memo))
+                done.append(self.finish(pred, sample, memo))
                 bar.update()
             if twice:  # the refinement's own frame-to-frame changes, smoothed
                 again = smooth_corrections(np.stack(done), priors, sigma)
-                done = [postprocess(p, s, margin, memo=m) for s, p, m in zip(samples, again, memos)]
+                done = [self.finish(p, s, m) for s, p, m in zip(samples, again, memos)]
         return np.stack([from_internal(f, up, units).astype(np.float32) for f in done])

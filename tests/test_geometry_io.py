@@ -313,3 +313,14 @@ def test_indented_obj_lines_are_read(tmp_path):
     v, f = load_mesh(path)
     np.testing.assert_array_equal(v, [[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]])
     np.testing.assert_array_equal(f, [[0, 1, 2], [0, 2, 3]])
+
+
+def test_indented_malformed_obj_line_is_refused(tmp_path):
+    """An indented 'v' line with too few numbers is refused like an unindented one (not skipped, which would shift
+    every later vertex index)."""
+    from garsim.geometry.io import load_mesh
+
+    path = tmp_path / "short.obj"
+    path.write_text("v 0 0 0\n  v 1 0\nv 1 0 0\nv 0 1 0\nv 1 1 0\nf 1 2 3\nf 2 4 3\n")
+    with pytest.raises(MeshError, match="line 2"):
+        load_mesh(path)

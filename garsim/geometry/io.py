@@ -223,15 +223,17 @@ def _obj_candidate_lines(data: bytes) -> np.ndarray:
     token_start = ~space & np.concatenate(([True], space[:-1]))
     tokens = np.add.reduceat(token_start.astype(np.int32), starts)
     comment = np.add.reduceat((a == 35).astype(np.int32), starts) > 0
-    first, second = a[starts], a[np.minimum(starts + 1, len(a) - 1)]
+    lead = np.flatnonzero(~((a == 32) | (a == 9) | (a == 11) | (a == 12)))  # a line's kind starts after its indent
+    head = lead[np.minimum(np.searchsorted(lead, starts), len(lead) - 1)] if len(lead) else starts
+    first, second = a[head], a[np.minimum(head + 1, len(a) - 1)]
     vf = ((first == ord("v")) & (second != ord("t")) & (second != ord("p"))) | (first == ord("f"))
     pick = vf & ((tokens < 4) | comment)
     pick[-1] = True
     return starts[pick]
 
 
-_OBJ_V = re.compile(rb"^[ \t]*v[ \t]+(\S+)[ \t]+(\S+)[ \t]+(\S+)", re.M)  # indented lines count too
-_OBJ_F = re.compile(rb"^[ \t]*f[ \t]+([^\r\n#]*)", re.M)
+_OBJ_V = re.compile(rb"^[ \t\x0b\x0c]*v[ \t]+(\S+)[ \t]+(\S+)[ \t]+(\S+)", re.M)  # indented lines count too
+_OBJ_F = re.compile(rb"^[ \t\x0b\x0c]*f[ \t]+([^\r\n#]*)", re.M)
 
 
 def _fan_corners(sizes: np.ndarray) -> np.ndarray:

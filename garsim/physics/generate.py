@@ -380,8 +380,9 @@ def simulate_job(
         )
 
     poses = target_poses(job, body)
+    modes = job.pose_modes
     if visit is not None:
-        poses = [poses[i] for i in visit]
+        poses, modes = [poses[i] for i in visit], [modes[i] for i in visit]
     pins = np.flatnonzero(garment.pinned)
     chain = [arm_pose, *poses]
     body_segs, pin_segs, targets = [], [], []
@@ -455,7 +456,7 @@ def simulate_job(
             "settled": [True] * len(accepted),
             "dynamic": [False] * len(accepted),
             "final_speed": [infos[k]["final_speed"][c] for k in accepted],
-            "pose_modes": [job.pose_modes[k] for k in accepted],
+            "pose_modes": [modes[k] for k in accepted],
             "target_poses": [
                 {b: np.asarray(v, dtype=float).round(6).tolist() for b, v in poses[k].items()} for k in accepted
             ],
