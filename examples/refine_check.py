@@ -17,7 +17,6 @@ import time
 from pathlib import Path
 
 import numpy as np
-import torch
 
 from garsim.api import GarSim
 from garsim.bodies.anny import AnnyBody
@@ -60,10 +59,8 @@ def cases_for(kind: str, size: int, body, model, poses: int = 8) -> dict[str, li
 
 
 def main(garments: list[str], sizes: list[int], against: Path | None) -> None:
-    torch.set_num_threads(1)
     body = AnnyBody({})
-    model = GarSim.pretrained().model
-    model.eval()
+    model = GarSim.pretrained().model  # the numpy runtime: one thread with OMP_NUM_THREADS=1
     other = load_refine(against) if against else None
     for kind in garments:
         for size in sizes:
