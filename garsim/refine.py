@@ -532,6 +532,7 @@ def _buffers(n: int, samples: tuple[int, int]) -> dict[str, Any]:
         "prior": (n, wp.vec3d),
         "w": (n, wp.float64),
         "ring": (n, wp.float64),
+        "ring3": (n, wp.vec3d),  # diffuse's one-ring sums (its own: it needs them zero on entry, and leaves them so)
     }
     return {name: wp.zeros(shape, dtype=dtype, device=_DEVICE) for name, (shape, dtype) in kinds.items()}
 
@@ -680,7 +681,7 @@ class _State:
                 + [buf["flag"]],
             ),
             diffuse=record(
-                k.diffuse, 1, [0.0, x, buf["x0"], con.wp_edges, con.wp_mobile, con.wp_inv_degree, buf["acc"]]
+                k.diffuse, 1, [0.0, x, buf["x0"], con.wp_edges, con.wp_mobile, con.wp_inv_degree, buf["ring3"]]
             ),
         )
         con.commands = (obs, margin, cmd)
@@ -712,8 +713,9 @@ class _State:
 
     def fall_back(self, prior: np.ndarray) -> np.ndarray | None:
         """Blend the mobile vertices that are deep inside the obstacle, on an edge deep through it or on a torn edge
-        towards ``prior`` (the ``fallback_blend`` kernel; :func:`fallback_weight` is its reference); returns the
-        blended garment, or None (nothing moved)."""
+        towards ``prior`` (the ``fallback_blend`` kernel; :func:`fallback_weight` is its reference once each
+        vertex's ``d`` is lowered to the depth of the deepest edge through the body at it); returns the blended
+        garment, or None (nothing moved)."""
         self.buf["prior"].numpy()[:] = prior
         self.cmd.fallback.launch()
         if not self.buf["flag"].numpy()[1]:

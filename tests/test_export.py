@@ -589,6 +589,14 @@ def test_each_input_is_checked_once_per_export(tmp_path, garment, body, monkeypa
 
 def test_pc2_bad_timing_writes_nothing(tmp_path, garment, body):
     frames, faces, uvs = garment
-    with pytest.raises(ExportError, match="rate positive"):
+    with pytest.raises(ExportError, match="rate a positive one"):
         export_animation(tmp_path / "a.pc2", frames, faces, body_frames=body[0], body_faces=body[1], rate=0)
     assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize("start, rate", [("soon", 1.0), (0.0, None), (0.0, -1.0), (float("nan"), 1.0)])
+def test_pc2_timing_errors_are_one_line_export_errors(start, rate):
+    from garsim.export.pc2 import _check_timing
+
+    with pytest.raises(ExportError, match="PC2 cache: start must be"):
+        _check_timing(start, rate)

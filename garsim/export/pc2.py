@@ -42,10 +42,13 @@ PC2_EXTENSIONS: tuple[str, ...] = (".pc2",)
 
 def _check_timing(start: Any, rate: Any) -> tuple[float, float]:
     """(start frame, sample rate) of a cache: finite, and the rate positive."""
-    start, rate = float(start), float(rate)
-    if not (np.isfinite(start) and np.isfinite(rate) and rate > 0):
-        raise ExportError(f"write_pc2: start must be finite and rate positive, got start={start}, rate={rate}")
-    return start, rate
+    try:
+        values = float(start), float(rate)
+    except (TypeError, ValueError):
+        values = (np.nan, np.nan)
+    if not (np.isfinite(values[0]) and np.isfinite(values[1]) and values[1] > 0):
+        raise ExportError(f"PC2 cache: start must be a finite number and rate a positive one, got {start!r}, {rate!r}")
+    return values
 
 
 def _pc2_bytes(frames: np.ndarray, start: float, rate: float) -> bytes:
