@@ -33,6 +33,13 @@ def open_cylinder(
     return v.astype(np.float32), f.astype(np.int64)
 
 
+def sleeve(radius: float = 0.045, length: float = 0.3, nu: int = 32, nv: int = 21) -> tuple[np.ndarray, np.ndarray]:
+    """A sleeve: an :func:`open_cylinder` of ``radius`` turned to lie along the y axis (centred on the origin), ``nu``
+    vertices around and ``nv`` along, outward faces -> (float64 vertices, int64 faces)."""
+    v, f = open_cylinder(radius, -length / 2, length / 2, rings=nv, sections=nu)
+    return v[:, [0, 2, 1]].astype(np.float64), f[:, ::-1].copy()  # swapping y and z mirrors: turn the faces back
+
+
 def loop_rows(sections: int, ring: int) -> np.ndarray:
     """The vertex indices of ring ``ring`` of :func:`open_cylinder`."""
     return np.arange(ring * sections, (ring + 1) * sections)

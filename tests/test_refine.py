@@ -7,6 +7,7 @@ import time
 import numpy as np
 import pytest
 import trimesh
+from mesh_fixtures import sleeve
 
 from garsim.geometry.cache import clear_all
 from garsim.geometry.inside import InsideTester
@@ -240,17 +241,6 @@ def test_deterministic_and_independent_of_what_ran_before(sphere):
     np.testing.assert_allclose(refine(x, cap, f, bv, bf, "cotton"), first, rtol=0, atol=1e-12)
 
 
-def _sleeve(radius: float = 0.045, length: float = 0.3, nu: int = 32, nv: int = 21):
-    """An open cylinder (a sleeve) of ``radius`` around the y axis, ``nu`` x ``nv`` vertices, outward faces."""
-    th = np.arange(nu) * 2 * np.pi / nu
-    tt, yy = np.meshgrid(th, np.linspace(-length / 2, length / 2, nv), indexing="ij")
-    v = np.stack([radius * np.cos(tt).ravel(), yy.ravel(), radius * np.sin(tt).ravel()], 1)
-    idx = np.arange(nu * nv).reshape(nu, nv)
-    a, b = idx[:, :-1].ravel(), idx[:, 1:].ravel()
-    c, d = np.roll(idx, -1, 0)[:, 1:].ravel(), np.roll(idx, -1, 0)[:, :-1].ravel()
-    return v, np.concatenate([np.stack([a, d, c], 1), np.stack([a, c, b], 1)])
-
-
 @pytest.fixture(scope="module")
 def arm():
     """A limb: a capsule of radius 4 cm along y; a sleeve 5 mm outside it; a patch of the sleeve's top pushed
@@ -258,7 +248,7 @@ def arm():
     limb = trimesh.creation.capsule(height=0.5, radius=0.04, count=[32, 32])
     limb.apply_transform(trimesh.transformations.rotation_matrix(np.pi / 2, [1, 0, 0]))
     bv, bf = np.asarray(limb.vertices), np.asarray(limb.faces, dtype=np.int64)
-    tpl, f = _sleeve()
+    tpl, f = sleeve()
     r = np.linalg.norm(tpl - np.array([0.0, 0.0, 0.045]), axis=1)
     bump = np.clip(1 - (r / 0.06) ** 2, 0, 1) ** 2
     x = tpl - 0.06 * bump[:, None] * np.array([0.0, 0.0, 1.0])

@@ -8,20 +8,10 @@ import time
 import numpy as np
 import pytest
 import trimesh
+from mesh_fixtures import sleeve
 
 from garsim.geometry.mesh import unique_edges
 from garsim.refine import RefineMemo, _constraints, _State, fallback_weight, obstacle, refine
-
-
-def _sleeve(radius: float = 0.045, length: float = 0.3, nu: int = 32, nv: int = 21):
-    """An open cylinder of ``radius`` around the y axis, ``nu`` x ``nv`` vertices, outward faces."""
-    th = np.arange(nu) * 2 * np.pi / nu
-    tt, yy = np.meshgrid(th, np.linspace(-length / 2, length / 2, nv), indexing="ij")
-    v = np.stack([radius * np.cos(tt).ravel(), yy.ravel(), radius * np.sin(tt).ravel()], 1)
-    idx = np.arange(nu * nv).reshape(nu, nv)
-    a, b = idx[:, :-1].ravel(), idx[:, 1:].ravel()
-    c, d = np.roll(idx, -1, 0)[:, 1:].ravel(), np.roll(idx, -1, 0)[:, :-1].ravel()
-    return v, np.concatenate([np.stack([a, d, c], 1), np.stack([a, c, b], 1)])
 
 
 def _capsule(radius: float, height: float, z: float = 0.0) -> trimesh.Trimesh:
@@ -57,7 +47,7 @@ def armpit():
     arm's top, where a push-out wraps the sleeve around the arm."""
     body = trimesh.util.concatenate([_capsule(0.04, 0.5), _capsule(0.10, 0.6, z=-0.155)])
     bv, bf = np.asarray(body.vertices), np.asarray(body.faces, dtype=np.int64)
-    tpl, f = _sleeve()
+    tpl, f = sleeve()
     r = np.linalg.norm(tpl - np.array([0.0, 0.0, -0.045]), axis=1)
     underside = (np.clip(1 - (r / 0.06) ** 2, 0, 1) ** 2)[:, None] * np.array([0.0, 0.0, 1.0])
     return bv, bf, tpl, f, tpl - 0.035 * underside, tpl + 0.06 * underside
@@ -119,7 +109,7 @@ def test_limb_through_the_cloth_between_shallow_vertices_uses_the_fallback():
 
 def test_the_fallback_kernel_is_fallback_weight():
     """The blend refine runs (a warp kernel) is the documented numpy reference: depth, edges through, torn edges."""
-    tpl, f = _sleeve(radius=0.03, nu=16, nv=9, length=0.16)
+    tpl, f = sleeve(radius=0.03, nu=16, nv=9, length=0.16)
     limb = _capsule(0.02, 0.5)
     bv, bf = np.asarray(limb.vertices), np.asarray(limb.faces, dtype=np.int64)
     x = tpl.copy()
