@@ -40,8 +40,11 @@ def _perturbed(config: GarSimConfig, seed: int = 0) -> GarSimModel:
     return model
 
 
+@pytest.mark.parametrize("chunk", [None, 7], ids=["one chunk", "chunks of 7 edges"])
 @pytest.mark.parametrize("options", CONFIGS.values(), ids=CONFIGS.keys())
-def test_runtime_matches_torch(options: dict, tmp_path: Path) -> None:
+def test_runtime_matches_torch(options: dict, chunk: int | None, tmp_path: Path, monkeypatch) -> None:
+    if chunk is not None:  # the message passing runs over the edges in chunks: several of them, a short last one
+        monkeypatch.setattr("garsim.model.runtime.EDGE_CHUNK", chunk)
     model = _perturbed(GarSimConfig(**{**SMALL, **options}))
     runtime = GarSimRuntime.load(model.save(tmp_path / "m"))
     sample = make_sample(n_around=16, n_down=6, fabric="denim")

@@ -35,6 +35,8 @@ if TYPE_CHECKING:  # torch: only for the annotation
     from garsim.model.garsim import GraphModel
 
 
+EDGE_CHUNK = 2048
+"""Edges per chunk of the message-passing loop (a chunk's (rows, edge_latent) intermediates stay in the cache)."""
 _STATIC = ContentCache(8, scope="garment")  # per (model, template garment, canonical body): pose-free features
 _TOKENS = itertools.count()
 
@@ -63,8 +65,9 @@ def _linear(x: np.ndarray, w: np.ndarray, b: np.ndarray | None, out: np.ndarray 
 
 
 def _layer_norm(x: np.ndarray, w: np.ndarray, b: np.ndarray, eps: float = 1e-5) -> np.ndarray:
-    xc = x - x.mean(axis=-1, keepdims=True)
-    inv = np.float32(1.0) / np.sqrt(np.einsum("ij,ij->i", xc, xc)[:, None] / np.float32(x.shape[-1]) + np.float32(eps))
+    d = x.shape[-1]
+    xc = x - (x @ np.full(d, np.float32(1.0 / d)))[:, None]  # the row means as one GEMV (~8x x.mean(axis=-1))
+    inv = np.float32(1.0) / np.sqrt(np.einsum("ij,ij->i", xc, xc)[:, None] / np.float32(d) + np.float32(eps))
     xc *= inv
     xc *= w
     xc += b
@@ -92,32 +95,39 @@ class _MLP:
             self.layers.append(("linear" if w.ndim == 2 else "norm", w, b))
         self.act = act
 
-    def __call__(
-        self,
-        x: np.ndarray,
-        out_scale: np.ndarray | None = None,
-        out_shift: np.ndarray | None = None,
-        out: np.ndarray | None = None,
-    ) -> np.ndarray:
-        """The MLP on ``x``, its output then scaled by ``out_scale`` and shifted by ``out_shift`` (per channel;
-        folded into the last layer's weights when that layer is linear); a last linear layer writes into ``out``
-        when given."""
+    def scaled(self, out_scale: np.ndarray, out_shift: np.ndarray) -> _MLP:
+        """This MLP with its output scaled by ``out_scale`` and shifted by ``out_shift`` (per channel), folded into
+        the last layer's weights when that layer is linear."""
+        mlp = _MLP.__new__(_MLP)
+        mlp.act, mlp.layers = self.act, list(self.layers)
+        kind, w, b = self.layers[-1]
+        if kind == "linear":
+            mlp.layers[-1] = (kind, w * out_scale[:, None], (b if b is not None else 0.0) * out_scale + out_shift)
+        else:
+            mlp.post = (out_scale, out_shift)
+        return mlp
+
+    post: tuple[np.ndarray, np.ndarray] | None = None
+    """A scale and shift applied after the last layer (``scaled`` of an MLP that ends in a norm)."""
+
+    def __call__(self, x: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
+        """The MLP on ``x``; the result is written into ``out`` when given (a reused buffer)."""
         n_linear = sum(kind == "linear" for kind, _, _ in self.layers)
         last = len(self.layers) - 1
-        fold = out_scale is not None and self.layers[last][0] == "linear"
         seen = 0
         for i, (kind, w, b) in enumerate(self.layers):
             if kind == "norm":
                 x = _layer_norm(x, w, b)  # type: ignore[arg-type]
                 continue
-            if fold and i == last:
-                w, b = w * out_scale[:, None], (b if b is not None else 0.0) * out_scale + out_shift
             x = _linear(x, w, b, out if i == last else None)
             seen += 1
             if seen < n_linear:  # an activation between linear layers, none after the last
                 x = self.act(x)
-        if out_scale is not None and not fold:
-            x = x * out_scale + out_shift
+        if self.post is not None:
+            x = x * self.post[0] + self.post[1]
+        if out is not None and x is not out:
+            out[...] = x
+            return out
         return x
 
 
@@ -230,32 +240,43 @@ class GarSimRuntime:
         if self.config.num_steps == 0:
             return node
         snd, rcv = edge_index
+        n_edges = len(rcv)
         uniform = bool((fabric == fabric[:1]).all())  # one fabric per garment: FiLM once, broadcast
-        # per-edge work buffers, reused by every step (the edge rows outnumber the nodes ~6:1)
-        hid_buf = np.empty((len(rcv), self.steps[0][3].shape[0]), dtype=np.float32)
+        # per-chunk work buffers, reused by every chunk and step: the edge rows outnumber the nodes ~6:1, and a
+        # chunk's intermediates stay in the core's cache (whole-array passes were ~20% slower at 2,400 vertices)
+        rows = min(n_edges, EDGE_CHUNK)
+        hid_buf = np.empty((rows, self.steps[0][3].shape[0]), dtype=np.float32)
         gathered = np.empty_like(hid_buf)
-        edge_out = np.empty_like(edge) if self.config.residual else None  # residual: added to edge right away
+        new_edge = np.empty_like(edge)
         for l in range(self.config.num_steps):
             w_recv, b_recv, w_send, w_edge, rest, node_mlp, film = self.steps[l % len(self.steps)]
-            hid = np.matmul(edge, w_edge.T, out=hid_buf)
-            hid += np.take(_linear(node, w_recv, b_recv), rcv, axis=0, out=gathered)
-            hid += np.take(node @ w_send.T, snd, axis=0, out=gathered)
-            hid = self._act(hid)
+            recv = _linear(node, w_recv, b_recv)  # node terms of the edge MLP's first layer, projected per node
+            send = node @ w_send.T
+            per_edge = None
             if film is not None and uniform:  # one scale/shift for every edge: folded into the last layer
                 scale, shift = np.split(_linear(fabric[:1], *film)[0], 2)
-                new_edge = rest(hid, out_scale=np.float32(1.0) + scale, out_shift=shift, out=edge_out)
-            else:
-                new_edge = rest(hid, out=edge_out)
-                if film is not None:
-                    scale, shift = np.split(np.take(_linear(fabric, *film), snd, axis=0), 2, axis=1)
-                    new_edge = new_edge * (np.float32(1.0) + scale) + shift
+                rest = rest.scaled(np.float32(1.0) + scale, shift)
+            elif film is not None:
+                per_edge = np.split(_linear(fabric, *film), 2, axis=1)  # per node, taken at each edge's sender
+            for lo in range(0, n_edges, rows):
+                hi = min(n_edges, lo + rows)
+                k = hi - lo
+                hid = np.matmul(edge[lo:hi], w_edge.T, out=hid_buf[:k])
+                hid += np.take(recv, rcv[lo:hi], axis=0, out=gathered[:k])
+                hid += np.take(send, snd[lo:hi], axis=0, out=gathered[:k])
+                rest(self._act(hid), out=new_edge[lo:hi])
+                if per_edge is not None:
+                    chunk = new_edge[lo:hi]
+                    chunk *= np.float32(1.0) + per_edge[0][snd[lo:hi]]
+                    chunk += per_edge[1][snd[lo:hi]]
             agg = np.asarray(mean @ new_edge, dtype=np.float32)
             new_node = node_mlp(np.concatenate([agg, node], axis=1))
             if self.config.residual:
                 node = node + new_node
                 edge += new_edge  # edge is this forward's own array (the edge encoder's output)
             else:
-                node, edge = new_node, new_edge
+                node = new_node
+                edge, new_edge = new_edge, edge
         return node
 
     def _decode(self, node: np.ndarray, fabric: np.ndarray) -> np.ndarray:
