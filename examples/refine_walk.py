@@ -33,9 +33,8 @@ from garsim.api import GarSim, SequenceConfig, smooth_corrections
 from garsim.bodies.anny import AnnyBody
 from garsim.bodies.poses import batched_matrices, motion, stack_poses
 from garsim.demo import DEMO_GARMENTS, _build_garment
-from garsim.eval.metrics import jitter_mm
-from garsim.geometry.inside import InsideTester, obstacle
-from garsim.geometry.mesh import edge_lengths, unique_edges
+from garsim.eval.metrics import MIN_REST, constraint_figures, jitter_mm
+from garsim.geometry.inside import obstacle
 from garsim.refine import RefineMemo, refine
 
 
@@ -45,35 +44,6 @@ def load_refine(path: Path):
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
     return module.refine
-
-
-MIN_REST = 0.005  # m: shorter (seam) edges are left out of the stretch figures, as the issue asks
-
-
-def frame_figures(frames: np.ndarray, garment, targets: np.ndarray, faces: np.ndarray) -> dict[str, float]:
-    """Stretch, inside and edge-crossing figures of (T, N, 3) drapes on their (T, Vb, 3) target bodies."""
-    e = unique_edges(garment.faces)
-    rest = edge_lengths(garment.vertices, garment.faces)
-    counted = (rest >= MIN_REST) & ~(garment.pinned[e[:, 0]] & garment.pinned[e[:, 1]])
-    free_edges = ~(garment.pinned[e[:, 0]] | garment.pinned[e[:, 1]])
-    ratios, inside, through = [], [], []
-    tester = InsideTester(targets[0], faces)
-    for x, body in zip(np.asarray(frames, np.float64), targets):
-        tester.update(body)
-        ratios.append(np.linalg.norm(x[e[:, 1]] - x[e[:, 0]], axis=1)[counted] / rest[counted])
-        inside.append(tester.inside(x))
-        through.append(tester.segment_hits(x[e[:, 0]], x[e[:, 1]]))
-    r, inside, through = np.concatenate(ratios), np.stack(inside), np.stack(through)
-    return {
-        "max_stretch": float(r.max()),
-        "p99_stretch": float(np.percentile(r, 99)),
-        "mean_stretch": float(r.mean()),
-        "edges_over_1.5_pct": 100.0 * float(np.mean(r > 1.5)),
-        "inside_pct": 100.0 * float(inside.mean()),
-        "inside_free_pct": 100.0 * float(inside[:, ~garment.pinned].mean()),  # pinned vertices follow the prior
-        "edges_through_pct": 100.0 * float(through.mean()),
-        "edges_through_free_pct": 100.0 * float(through[:, free_edges].mean()),  # edges without a pinned end
-    }
 
 
 def refine_ms(
@@ -148,8 +118,8 @@ def main(vertices: list[int], frames: int, out: Path, model: str | None = None, 
                 "vertices": int(len(g.vertices)),
                 "fabric": fabric,
                 "construction": construction,
-                "raw": frame_figures(raw, g, targets, body.faces),
-                "refined": frame_figures(refined, g, targets, body.faces),
+                "raw": constraint_figures(raw, g.vertices, g.faces, g.pinned, targets, body.faces),
+                "refined": constraint_figures(refined, g.vertices, g.faces, g.pinned, targets, body.faces),
                 "refine_cpu_ms_per_frame": first_ms,
                 "refine_second_pass_cpu_ms_per_frame": second_ms,
                 **({"against_cpu_ms_per_frame": ms["against"]} if against else {}),

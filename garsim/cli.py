@@ -596,13 +596,13 @@ EXAMPLES: dict[str, str] = {
     "--out draped.glb\n  garsim drape --canonical a.obj --target bodies/ --garment g.obj --pinned auto --out draped/",
     "animate": "garsim animate --garment skirt.obj --motion walk --out walk.glb\n"
     "  garsim animate --garment g.obj --canonical a.obj --targets bodies/ --out anim.usdc",
-    "train": "garsim train --data ~/garsim-data/v2 --out runs/v1 --resolution both",
-    "eval": "garsim eval --data ~/garsim-data/v2 --model runs/v1/best --out results.json",
+    "train": "garsim train --data ~/garsim-data/v3 --out runs/v1 --resolution both",
+    "eval": "garsim eval --data ~/garsim-data/v3 --model runs/v1/best --out results.json",
     "bench": "garsim bench --sizes 600 2400 --out bench.json",
-    "data": "garsim data info ~/garsim-data/v2",
-    "generate": "garsim data generate --out ~/garsim-data/v2 --seed 0 --workers 2",
-    "info": "garsim data info ~/garsim-data/v2 --json",
-    "verify": "garsim data verify ~/garsim-data/v2",
+    "data": "garsim data info ~/garsim-data/v3",
+    "generate": "garsim data generate --out ~/garsim-data/v3 --seed 0 --workers 2",
+    "info": "garsim data info ~/garsim-data/v3 --json",
+    "verify": "garsim data verify ~/garsim-data/v3",
 }
 """One example per command, shown at the end of its ``--help``."""
 MOTION_CHOICES: tuple[str, ...] = ("walk", "raise_arms", "turn", "sit_down")

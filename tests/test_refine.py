@@ -12,7 +12,7 @@ from mesh_fixtures import sleeve
 from garsim.geometry.cache import clear_all
 from garsim.geometry.inside import InsideTester
 from garsim.geometry.mesh import unique_edges
-from garsim.refine import default_max_stretch, obstacle, refine
+from garsim.refine import MAX_ROUNDS, TORN_STRETCH, default_max_stretch, obstacle, refine
 
 
 def _grid(n: int = 12, h: float = 0.02) -> tuple[np.ndarray, np.ndarray]:
@@ -66,6 +66,20 @@ def test_stretched_region_comes_back_within_limit(sphere):
     assert limit == pytest.approx(1.10)
     assert _stretch(out, tpl, f).max() <= limit * 1.002
     assert np.isfinite(out).all()
+
+
+def test_torn_sheet_gets_the_rounds_it_needs(sphere, monkeypatch):
+    """A sheet torn apart (its right half moved 15 cm: 16x edges) closes to within the simulator's 1.5x bound; with
+    only the ordinary rounds it would stay torn."""
+    bv, bf = sphere
+    bv = bv + np.array([0.0, 0.0, -1.0])  # obstacle far away
+    tpl, f = _grid(30, 0.01)
+    x = tpl.copy()
+    x[tpl[:, 0] > 0, 0] += 0.15
+    assert _stretch(x, tpl, f).max() > 15.0
+    assert _stretch(refine(x, tpl, f, bv, bf, "cotton"), tpl, f).max() <= TORN_STRETCH
+    monkeypatch.setattr("garsim.refine.MAX_TORN_ROUNDS", MAX_ROUNDS)
+    assert _stretch(refine(x, tpl, f, bv, bf, "cotton"), tpl, f).max() > TORN_STRETCH
 
 
 def test_pushed_into_sphere_ends_outside(sphere):

@@ -14,6 +14,10 @@ With x the predicted garment (N, 3), x̄ the ground truth, E its unique mesh edg
   ray from x_i towards x_j within its length): an edge with one end inside, or a limb cutting the cloth
   between two outside vertices, which no vertex metric sees. Same definition as ``../shared/external-eval``.
 - Edge-length error (mm): 1000 · mean_(i,j) | ‖x_i − x_j‖ − ‖x̄_i − x̄_j‖ |.
+- Constraint figures (``constraint_figures``, the refinement's acceptance bounds): over the edges whose template rest
+  length is at least ``min_rest`` (5 mm: seam edges are left out) and that have a free end, the max, 99th percentile
+  and mean of the stretch ratio ‖x_i − x_j‖ / rest and the share over 1.5x; inside (%) and edge crossings (%), of
+  all vertices / edges and of the free ones (pinned vertices follow the skinning prior, inside the body or not).
 - Jitter (mm/frame²), for a sequence of T ≥ 3 consecutive frames: 1000 · mean_{t, i} ‖x_i[t+1] − 2 x_i[t] + x_i[t−1]‖
   (the mean vertex acceleration), to be read beside the ground truth's own.
 """
@@ -24,7 +28,7 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
-from garsim.geometry.inside import closest_on_mesh, collision_fraction, inside_mask, segment_hits
+from garsim.geometry.inside import InsideTester, closest_on_mesh, collision_fraction, inside_mask, segment_hits
 from garsim.geometry.mesh import (
     edge_lengths,
     face_normals,
@@ -98,6 +102,49 @@ def edge_crossing_pct(
 def edge_length_error_mm(pred: np.ndarray, truth: np.ndarray, faces: np.ndarray) -> float:
     """Mean absolute difference of edge lengths, predicted vs true (mm)."""
     return float(np.abs(edge_lengths(pred, faces) - edge_lengths(truth, faces)).mean() * 1000.0)
+
+
+MIN_REST = 0.005
+"""m: edges shorter than this in the template (seams) are left out of the stretch figures."""
+
+
+def constraint_figures(
+    frames: np.ndarray,
+    template: np.ndarray,
+    faces: np.ndarray,
+    pinned: np.ndarray,
+    bodies: np.ndarray,
+    body_faces: np.ndarray,
+    min_rest: float = MIN_REST,
+    ratios_out: list | None = None,
+) -> dict[str, float]:
+    """Stretch, inside and edge-crossing figures of (T, N, 3) drapes of one garment on their (T, Vb, 3) bodies,
+    pooled over the frames (see the module doc). ``ratios_out``: a list that receives the counted edges' stretch
+    ratios (to pool them over several garments)."""
+    e = unique_edges(faces)
+    rest = edge_lengths(template, faces)
+    counted = (rest >= min_rest) & ~(pinned[e[:, 0]] & pinned[e[:, 1]])
+    free_edges = ~(pinned[e[:, 0]] | pinned[e[:, 1]])
+    ratios, inside, through = [], [], []
+    tester = InsideTester(bodies[0], body_faces)
+    for x, body in zip(np.asarray(frames, np.float64), bodies):
+        tester.update(body)
+        ratios.append(np.linalg.norm(x[e[:, 1]] - x[e[:, 0]], axis=1)[counted] / rest[counted])
+        inside.append(tester.inside(x))
+        through.append(tester.segment_hits(x[e[:, 0]], x[e[:, 1]]))
+    r, inside, through = np.concatenate(ratios), np.stack(inside), np.stack(through)
+    if ratios_out is not None:
+        ratios_out.append(r)
+    return {
+        "max_stretch": float(r.max()) if len(r) else 1.0,
+        "p99_stretch": float(np.percentile(r, 99)) if len(r) else 1.0,
+        "mean_stretch": float(r.mean()) if len(r) else 1.0,
+        "edges_over_1.5_pct": 100.0 * float(np.mean(r > 1.5)) if len(r) else 0.0,
+        "inside_pct": 100.0 * float(inside.mean()),
+        "inside_free_pct": 100.0 * float(inside[:, ~pinned].mean()) if (~pinned).any() else 0.0,
+        "edges_through_pct": 100.0 * float(through.mean()),
+        "edges_through_free_pct": 100.0 * float(through[:, free_edges].mean()) if free_edges.any() else 0.0,
+    }
 
 
 def jitter_mm(frames: np.ndarray) -> float:
