@@ -16,7 +16,7 @@ from garsim.garments.fabrics import Fabric, fabric_from_values, get_fabric
 from garsim.garments.garment import Garment
 from garsim.garments.remesh import BarycentricMap, barycentric_map, decimate, transfer_barycentric
 from garsim.geometry.cache import ContentCache, content_key
-from garsim.geometry.io import MeshError, as_mesh, y_up_to_z_up, z_up_to_y_up
+from garsim.geometry.io import UNITS, MeshError, as_mesh, from_internal, to_internal
 from garsim.geometry.mesh import cached_vertex_normals, top_border_loops
 from garsim.geometry.proximity import push_outside
 
@@ -90,29 +90,11 @@ def fabric_fields(fabric: Any) -> tuple[str, dict[str, float] | None]:
     )
 
 
-UNITS: dict[str, float] = {"m": 1.0, "cm": 0.01, "mm": 0.001}
-"""Length units accepted at the API boundary (metres per unit)."""
 BODY_HEIGHT_RANGE = (0.4, 2.6)
 """Plausible standing body heights in metres: outside it the input is in other units (or not a body)."""
 FAR_FROM_BODY = 0.25
 """m: a garment whose median vertex is farther than this from the canonical body does not surround it (lenient:
 the hem of a full maxi skirt hangs well beyond 10 cm)."""
-
-
-def to_internal(vertices: np.ndarray, up: str = "z", units: str = "m") -> np.ndarray:
-    """User coordinates (``up`` axis, ``units``) -> garsim's (metres, Z up), float64."""
-    if up not in ("z", "y"):
-        raise ValueError(f"up must be 'z' or 'y', got {up!r}")
-    if units not in UNITS:
-        raise ValueError(f"units must be one of {', '.join(UNITS)}, got {units!r}")
-    v = np.asarray(vertices, dtype=np.float64) * UNITS[units]
-    return y_up_to_z_up(v) if up == "y" else v
-
-
-def from_internal(vertices: np.ndarray, up: str = "z", units: str = "m") -> np.ndarray:
-    """Inverse of :func:`to_internal` (garsim's metres, Z up -> the user's axis and units)."""
-    v = z_up_to_y_up(np.asarray(vertices, dtype=np.float64)) if up == "y" else np.asarray(vertices, dtype=np.float64)
-    return v / UNITS[units]
 
 
 def check_scene(body: np.ndarray, garment: np.ndarray, up: str = "z", units: str = "m") -> None:
@@ -145,7 +127,8 @@ def check_scene(body: np.ndarray, garment: np.ndarray, up: str = "z", units: str
     if float(np.median(dist)) > FAR_FROM_BODY:
         raise MeshError(
             f"the garment's median vertex is {100 * float(np.median(dist)):.0f} cm from the canonical body: "
-            "it must be draped on the canonical body (same position, axis and units)"
+            "it must be draped on the canonical body (same position, axis and units; a Y-up or cm/mm file: pass "
+            "up= / units=, CLI: --up / --units)"
         )
 
 

@@ -324,27 +324,33 @@ def _load_targets(src: Path, faces: object) -> list:
 
 def cmd_animate(args: argparse.Namespace) -> int:
     out = _check_output(args.out, ANIMATION_OUTPUTS, "--out")  # checked before any work
-    if args.motion and (args.canonical or args.targets):
-        raise ValueError("give either --motion NAME or --canonical with --targets, not both")
-    if not args.motion and not (args.canonical and args.targets):
+    sources = [name for name, given in (("--motion", args.motion), ("--poses", args.poses)) if given]
+    if args.canonical or args.targets:
+        sources.append("--canonical with --targets")
+    if len(sources) > 1:
+        raise ValueError(f"give one of {' or '.join(sources)}, not both")
+    if not sources or (sources == ["--canonical with --targets"] and not (args.canonical and args.targets)):
         raise ValueError(
-            "give --motion NAME (the default Anny body), or --canonical and --targets (a folder of "
-            "body OBJs or an .npz with an array 'vertices' of shape (T, V, 3))"
+            "give one of --motion NAME or --poses FILE (the default Anny body), or --canonical and --targets (a "
+            "folder of body OBJs or an .npz with an array 'vertices' of shape (T, V, 3))"
         )
     if (args.motion and args.frames < 2) or args.fps <= 0:
         raise ValueError(f"--frames must be >= 2 and --fps > 0, got {args.frames} and {args.fps}")
+    if args.interpolate is not None and (not args.poses or args.interpolate < 2):
+        raise ValueError("--interpolate N (N >= 2) resamples the keyframes of --poses FILE")
     import numpy as np
 
     from garsim.api import GarSim, SequenceConfig, check_smoothing, fabric_fields
     from garsim.export import animation_files, export_animation
-    from garsim.geometry.io import load_mesh, load_mesh_with_attributes
+    from garsim.geometry.io import from_internal, load_mesh, load_mesh_with_attributes
 
     for o in animation_files(out, with_body=True):  # a .pc2 also writes <stem>.obj and the body's files
-        for flag, given in (("--garment", args.garment), ("--canonical", args.canonical)):
+        for flag, given in (("--garment", args.garment), ("--canonical", args.canonical), ("--poses", args.poses)):
             if given and _same_file(o, given):
                 raise ValueError(f"--out {out} would overwrite the input {flag} {given} (as {o}); write elsewhere")
     fabric_fields(args.fabric)
     smoothing = check_smoothing(SequenceConfig.smoothing if args.smoothing is None else args.smoothing)
+    pinned = "auto" if args.pinned == "auto" else _read_pinned(args.pinned) if args.pinned else None
     gv, gf, attributes = load_mesh_with_attributes(args.garment)
     garment = (gv, gf)
     uvs = attributes.vertex_uvs(gf, len(gv))  # the animation formats store one UV per vertex
@@ -353,25 +359,43 @@ def cmd_animate(args: argparse.Namespace) -> int:
             "%s: the UVs have seams (a vertex with two UVs); animations store one per vertex, so they are dropped",
             args.garment,
         )
-    if args.motion:
-        from garsim.bodies.poses import batched_matrices, motion, stack_poses
+    if args.motion or args.poses:
+        from garsim.bodies import poses
 
-        sequence = motion(args.motion, args.frames)  # an unknown motion fails before Anny is built
+        if args.motion:
+            sequence = poses.motion(args.motion, args.frames)  # an unknown motion fails before Anny is built
+        else:
+            sequence = poses.read_pose_sequence(args.poses)
+            if args.interpolate is not None:
+                sequence = poses.resample_poses(sequence, args.interpolate)
         from garsim.bodies.anny import AnnyBody
 
         body = AnnyBody()
-        canonical = (body.canonical().vertices, body.faces)
-        targets = list(body.pose_batch(batched_matrices(stack_poses(sequence)))[0])
         faces = body.faces
+        # Anny's bodies are in garsim's Z-up metres; the garment is in --up / --units: bring the bodies there
+        canonical = (from_internal(body.canonical().vertices, args.up, args.units), faces)
+        targets = list(from_internal(poses.pose_bodies(body, sequence), args.up, args.units))
     else:
         canonical = load_mesh(args.canonical)
         faces = canonical[1]
         targets = _load_targets(Path(args.targets), faces)
     sim = GarSim.prior_only() if args.prior_only else GarSim.pretrained()
     frames = sim.drape_sequence(
-        canonical, targets, garment, fabric=args.fabric, progress=not args.quiet, smoothing=smoothing
+        canonical,
+        targets,
+        garment,
+        fabric=args.fabric,
+        pinned=pinned,
+        progress=not args.quiet,
+        up=args.up,
+        units=args.units,
+        smoothing=smoothing,
     )
     extra = {} if uvs is None else {"uvs": uvs}
+    if attributes.normals is not None:  # the garment came with normals: each frame gets its own
+        from garsim.geometry.mesh import vertex_normals
+
+        extra["normals"] = np.stack([vertex_normals(f, gf) for f in frames]).astype(np.float32)
     from garsim import __version__
 
     metadata = {
@@ -380,9 +404,20 @@ def cmd_animate(args: argparse.Namespace) -> int:
         "fabric": args.fabric,
         "refine": sim.refine,
         "temporal_smoothing_frames": smoothing if sim.model is not None else 0.0,  # the bare prior is never smoothed
+        "up": args.up,
+        "units": args.units,
     }
     written = export_animation(
-        out, frames, gf, metadata=metadata, body_frames=np.stack(targets), body_faces=faces, fps=args.fps, **extra
+        out,
+        frames,
+        gf,
+        metadata=metadata,
+        up=args.up,
+        units=args.units,
+        body_frames=np.stack(targets),
+        body_faces=faces,
+        fps=args.fps,
+        **extra,
     )
     for path in written:
         print(path)
@@ -595,7 +630,8 @@ EXAMPLES: dict[str, str] = {
     "--png draped.png\n  garsim drape --canonical a.glb --target b.glb --garment g.glb --up y --units cm "
     "--out draped.glb\n  garsim drape --canonical a.obj --target bodies/ --garment g.obj --pinned auto --out draped/",
     "animate": "garsim animate --garment skirt.obj --motion walk --out walk.glb\n"
-    "  garsim animate --garment g.obj --canonical a.obj --targets bodies/ --out anim.usdc",
+    "  garsim animate --garment skirt.obj --poses keyframes.json --interpolate 48 --out poses.usdc\n"
+    "  garsim animate --garment g.obj --canonical a.obj --targets bodies/ --up y --units cm --out anim.pc2",
     "train": "garsim train --data ~/garsim-data/v3 --out runs/v1 --resolution both",
     "eval": "garsim eval --data ~/garsim-data/v3 --model runs/v1/best --out results.json",
     "bench": "garsim bench --sizes 600 2400 --out bench.json",
@@ -691,9 +727,35 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--garment", required=True, help="garment mesh draped on the canonical body")
     p.add_argument("--motion", choices=MOTION_CHOICES, help="a motion of the library, on the default Anny body")
     p.add_argument("--frames", type=int, default=30, help="frames of a --motion")
+    p.add_argument(
+        "--poses",
+        metavar="FILE",
+        help="Anny poses per frame, on the default Anny body: a .json list of frames, each {bone: axis-angle "
+        "[x, y, z] radians or 3x3/4x4 matrix} or {joint angle: degrees from the T-pose, e.g. hip_flexion_L}, or an "
+        ".npz of one (T, 3)/(T, 3, 3)/(T, 4, 4) array per bone or (T,) per joint angle",
+    )
+    p.add_argument("--interpolate", type=int, metavar="N", help="resample the --poses keyframes to N frames (slerp)")
     p.add_argument("--canonical", help="canonical body mesh (with --targets)")
     p.add_argument("--targets", help="folder of target body OBJs (sorted by name) or an .npz with 'vertices' (T, V, 3)")
     p.add_argument("--fabric", default="cotton", choices=FABRIC_CHOICES, help="fabric preset")
+    p.add_argument(
+        "--pinned",
+        metavar="FILE|auto",
+        help="garment vertices that follow the prior exactly: a text file of vertex indices, or 'auto' (the "
+        "garment's top border loops), as for `garsim drape`",
+    )
+    p.add_argument(
+        "--up",
+        choices=("z", "y"),
+        default="z",
+        help="up axis of the input meshes and of the PC2/OBJ output (USD declares it; glTF is always Y up)",
+    )
+    p.add_argument(
+        "--units",
+        choices=("m", "cm", "mm"),
+        default="m",
+        help="length unit of the input meshes and of the PC2/OBJ output (USD declares it; glTF is always metres)",
+    )
     p.add_argument("--fps", type=float, default=30.0, help="frames per second of the animation")
     p.add_argument("--out", required=True, help=f"output file ({', '.join(ANIMATION_OUTPUTS)})")
     p.add_argument("--prior-only", action="store_true", help="use the skinning prior, not the model")

@@ -273,3 +273,65 @@ def test_walk_cycle_is_periodic_and_counter_phased(body, axes, dominant, checker
     assert checker.valid(vertices).all()
     with pytest.raises(ValueError, match="stride"):
         P.walk_cycle(8, stride=3.0)
+
+
+@pytest.mark.parametrize("num_frames", [2, 3, 5, 30])
+def test_motion_library_any_length(num_frames):
+    """Every motion gives the frames asked for; all but the walk start standing, arms down; the turn twists to the
+    left first, then to the right; the sit ends seated (hips and knees bent)."""
+    from garsim.bodies.poses import MOTIONS, STANDING, motion
+
+    for name in MOTIONS:
+        frames = motion(name, num_frames)
+        assert len(frames) == num_frames, name
+        if name != "walk":
+            for bone, r in STANDING.items():
+                np.testing.assert_allclose(frames[0][bone], r, atol=1e-12)
+    twist = [float(p["spine01"][2]) for p in motion("turn", 9)]
+    assert max(twist[:4]) > 0.08 and min(twist[4:]) < -0.08 and np.argmax(twist) < np.argmin(twist)
+    seated = motion("sit_down", num_frames)[-1]
+    assert np.linalg.norm(seated["upperleg01.L"]) > np.radians(70) and np.linalg.norm(seated["lowerleg01.L"]) > 1.0
+    with pytest.raises(ValueError, match="unknown motion"):
+        motion("dance", 4)
+
+
+def test_resample_poses_keeps_keyframes_and_slerps_between():
+    from garsim.bodies.poses import resample_poses
+
+    a = {"neck01": np.zeros(3)}
+    b = {"neck01": np.array([0.0, 0.0, 0.8])}
+    c = {"neck01": np.array([0.4, 0.0, 0.0])}
+    out = resample_poses([a, b, c], 5)
+    np.testing.assert_allclose([p["neck01"] for p in out[::2]], [a["neck01"], b["neck01"], c["neck01"]], atol=1e-12)
+    np.testing.assert_allclose(out[1]["neck01"], [0.0, 0.0, 0.4], atol=1e-12)  # half way, about one axis
+    assert len(resample_poses([a], 3)) == 3
+
+
+def test_read_pose_sequence_formats_agree(tmp_path):
+    """Axis-angles, 3x3 and 4x4 matrices in JSON and one array per bone in an .npz read as the same poses; joint
+    angles become the pose ``angles_to_pose`` makes."""
+    import json
+
+    from garsim.bodies.poses import angles_to_pose, read_pose_sequence, unbatch
+
+    rv = np.array([[0.3, -0.2, 0.1], [0.0, 0.5, 0.0]])
+    mats = roma.rotvec_to_rotmat(torch.as_tensor(rv)).numpy()
+    homog = np.tile(np.eye(4), (2, 1, 1))
+    homog[:, :3, :3] = mats
+    (tmp_path / "a.json").write_text(json.dumps([{"neck01": r.tolist()} for r in rv]))
+    (tmp_path / "m.json").write_text(json.dumps({"frames": [{"neck01": m.tolist()} for m in mats]}))
+    (tmp_path / "h.json").write_text(json.dumps([{"neck01": h.tolist()} for h in homog]))
+    np.savez(tmp_path / "a.npz", neck01=rv)
+    for name in ("a.json", "m.json", "h.json", "a.npz"):
+        got = read_pose_sequence(tmp_path / name)
+        np.testing.assert_allclose([p["neck01"] for p in got], rv, atol=1e-9, err_msg=name)
+    (tmp_path / "j.json").write_text(json.dumps([{"hip_flexion_L": 30.0}]))
+    (frame,) = read_pose_sequence(tmp_path / "j.json")
+    for bone, r in unbatch(angles_to_pose({"hip_flexion_L": 30.0}), 0).items():
+        np.testing.assert_allclose(frame[bone], r, atol=1e-12)
+    (tmp_path / "x.txt").write_text("")
+    with pytest.raises(ValueError, match="is .json or .npz"):
+        read_pose_sequence(tmp_path / "x.txt")
+    np.savez(tmp_path / "ragged.npz", neck01=rv, spine01=rv[:1])
+    with pytest.raises(ValueError, match="one row per frame"):
+        read_pose_sequence(tmp_path / "ragged.npz")

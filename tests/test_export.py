@@ -6,13 +6,13 @@ USD: pxr.Usd; PC2: read_pc2 and a raw struct parse; OBJ: trimesh; video: imageio
 
 from __future__ import annotations
 
-import base64
 import json
 import struct
 from pathlib import Path
 
 import numpy as np
 import pytest
+from export_readers import accessor, gltf_frames, read_gltf, z_up
 
 from garsim.export import (
     SUPPORTED_EXTENSIONS,
@@ -66,63 +66,6 @@ def body() -> tuple[np.ndarray, np.ndarray]:
 def _close(actual: np.ndarray, expected: np.ndarray) -> None:
     scale = float(np.abs(expected).max())
     np.testing.assert_allclose(actual, expected, rtol=RTOL, atol=RTOL * scale)
-
-
-def _z_up(points: np.ndarray) -> np.ndarray:
-    """Undo the exporter's Z-up -> Y-up ((x, y, z) -> (x, z, -y)): (x, y, z) -> (x, -z, y)."""
-    return np.stack([points[..., 0], -points[..., 2], points[..., 1]], axis=-1)
-
-
-# ----------------------------------------------------------------------------- an independent glTF reader
-
-
-def _read_gltf(path: Path) -> tuple[dict, bytes]:
-    """(JSON document, BIN buffer) of a .glb (checking the chunk layout) or a .gltf with a data URI."""
-    data = path.read_bytes()
-    if path.suffix == ".gltf":
-        doc = json.loads(data)
-        uri = doc["buffers"][0]["uri"]
-        assert uri.startswith("data:application/octet-stream;base64,")
-        return doc, base64.b64decode(uri.split(",", 1)[1])
-    magic, version, total = struct.unpack_from("<III", data, 0)
-    assert (magic, version, total) == (0x46546C67, 2, len(data))
-    json_len, json_type = struct.unpack_from("<II", data, 12)
-    assert json_type == 0x4E4F534A and json_len % 4 == 0
-    doc = json.loads(data[20 : 20 + json_len])
-    bin_len, bin_type = struct.unpack_from("<II", data, 20 + json_len)
-    assert bin_type == 0x004E4942 and bin_len % 4 == 0
-    assert 28 + json_len + bin_len == len(data)
-    blob = data[28 + json_len : 28 + json_len + bin_len]
-    assert doc["buffers"][0]["byteLength"] <= bin_len
-    return doc, blob
-
-
-def _accessor(doc: dict, blob: bytes, index: int) -> np.ndarray:
-    acc = doc["accessors"][index]
-    view = doc["bufferViews"][acc["bufferView"]]
-    dtype = {5126: "<f4", 5125: "<u4", 5123: "<u2"}[acc["componentType"]]
-    width = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4}[acc["type"]]
-    assert "byteStride" not in view
-    offset = view.get("byteOffset", 0) + acc.get("byteOffset", 0)
-    a = np.frombuffer(blob, dtype=dtype, count=acc["count"] * width, offset=offset)
-    assert a.nbytes <= view["byteLength"]
-    return a.reshape(acc["count"], width) if width > 1 else a
-
-
-def _gltf_mesh(doc: dict, blob: bytes, name: str) -> dict:
-    """Base attributes, faces, and every frame reconstructed as base + morph target k."""
-    mesh = next(m for m in doc["meshes"] if m["name"] == name)
-    (prim,) = mesh["primitives"]
-    attrs = {k: _accessor(doc, blob, i) for k, i in prim["attributes"].items()}
-    base = attrs["POSITION"]
-    frames = np.stack([base + _accessor(doc, blob, t["POSITION"]) for t in prim["targets"]])
-    out = {"attrs": attrs, "faces": _accessor(doc, blob, prim["indices"]).reshape(-1, 3), "frames": frames}
-    if "NORMAL" in prim["targets"][0]:
-        out["normals"] = np.stack([attrs["NORMAL"] + _accessor(doc, blob, t["NORMAL"]) for t in prim["targets"]])
-    for t in prim["targets"]:  # glTF requires min/max on POSITION accessors, morph targets included
-        acc = doc["accessors"][t["POSITION"]]
-        assert "min" in acc and "max" in acc
-    return out
 
 
 # ----------------------------------------------------------------------------- PC2 / OBJ
@@ -204,20 +147,20 @@ def test_glb_base_mesh_morph_targets_and_animation(tmp_path, garment, body, inte
     # trimesh: the base meshes are frame 0 in Y-up, vertex order and faces kept, UVs survive
     scene = trimesh.load(p, force="scene")
     g, b = scene.geometry["Garment"], scene.geometry["Body"]
-    _close(_z_up(np.asarray(g.vertices)), frames[0])
+    _close(z_up(np.asarray(g.vertices)), frames[0])
     np.testing.assert_array_equal(g.faces, faces)
     _close(np.asarray(g.visual.uv), uvs)
-    _close(_z_up(np.asarray(b.vertices)), body[0][0])
+    _close(z_up(np.asarray(b.vertices)), body[0][0])
     np.testing.assert_array_equal(b.faces, body[1])
     # our reader: every frame from the morph targets
-    doc, blob = _read_gltf(p)
-    gm = _gltf_mesh(doc, blob, "Garment")
+    doc, blob = read_gltf(p)
+    gm = gltf_frames(doc, blob, "Garment")
     assert gm["frames"].shape == (T, 9, 3)
-    _close(_z_up(gm["frames"]), frames)
+    _close(z_up(gm["frames"]), frames)
     np.testing.assert_array_equal(gm["faces"], faces)
     _close(gm["attrs"]["TEXCOORD_0"], np.stack([uvs[:, 0], 1.0 - uvs[:, 1]], axis=1))  # glTF's v points down
-    bm = _gltf_mesh(doc, blob, "Body")
-    _close(_z_up(bm["frames"]), body[0])
+    bm = gltf_frames(doc, blob, "Body")
+    _close(z_up(bm["frames"]), body[0])
     # the animation: key k at k / fps with weight 1 on target k only, one channel per mesh node
     (anim,) = doc["animations"]
     assert len(anim["channels"]) == 2
@@ -227,8 +170,8 @@ def test_glb_base_mesh_morph_targets_and_animation(tmp_path, garment, body, inte
         assert ch["target"]["path"] == "weights" and sampler["interpolation"] == interpolation
         node = doc["nodes"][ch["target"]["node"]]
         names.add(node["name"])
-        times = _accessor(doc, blob, sampler["input"])
-        weights = _accessor(doc, blob, sampler["output"]).reshape(T, T)
+        times = accessor(doc, blob, sampler["input"])
+        weights = accessor(doc, blob, sampler["output"]).reshape(T, T)
         _close(times, np.arange(T) / 24.0)
         np.testing.assert_array_equal(weights, np.eye(T))
         assert len(doc["meshes"][node["mesh"]]["primitives"][0]["targets"]) == T
@@ -241,8 +184,8 @@ def test_gltf_embedded_z_up_and_per_frame_normals(tmp_path, garment):
     normals = rng.normal(size=(T, 9, 3)).astype(np.float32)
     normals /= np.linalg.norm(normals, axis=2, keepdims=True)
     out = export_animation(tmp_path / "drape.gltf", frames, faces, y_up=False, normals=normals)
-    doc, blob = _read_gltf(out[0])
-    gm = _gltf_mesh(doc, blob, "Garment")
+    doc, blob = read_gltf(out[0])
+    gm = gltf_frames(doc, blob, "Garment")
     _close(gm["frames"], frames)  # y_up=False: garsim's coordinates as they are
     _close(gm["normals"], normals)
     assert [m["name"] for m in doc["meshes"]] == ["Garment"]
@@ -250,8 +193,8 @@ def test_gltf_embedded_z_up_and_per_frame_normals(tmp_path, garment):
 
 def test_gltf_single_frame(tmp_path, garment):
     frames, faces, _ = garment
-    doc, blob = _read_gltf(write_gltf_animation(tmp_path / "still.glb", frames[:1], faces))
-    _close(_z_up(_gltf_mesh(doc, blob, "Garment")["frames"]), frames[:1])
+    doc, blob = read_gltf(write_gltf_animation(tmp_path / "still.glb", frames[:1], faces))
+    _close(z_up(gltf_frames(doc, blob, "Garment")["frames"]), frames[:1])
 
 
 # ----------------------------------------------------------------------------- USD
@@ -436,7 +379,7 @@ def test_gltf_metadata_in_asset_extras(tmp_path, garment, body, ext):
     (p,) = export_animation(
         tmp_path / f"drape{ext}", frames, faces, body_frames=body[0], body_faces=body[1], uvs=uvs, metadata=nested
     )
-    doc, _ = _read_gltf(p)
+    doc, _ = read_gltf(p)
     assert doc["asset"]["extras"]["garsim"] == nested
     assert doc["asset"]["version"] == "2.0"
     assert doc["extras"]["frames"] == T  # the existing extras stay
@@ -445,7 +388,7 @@ def test_gltf_metadata_in_asset_extras(tmp_path, garment, body, ext):
     assert len(scene.geometry) == 2
     # without metadata nothing is added
     (q,) = export_animation(tmp_path / f"plain{ext}", frames, faces)
-    doc, _ = _read_gltf(q)
+    doc, _ = read_gltf(q)
     assert "extras" not in doc["asset"] and "extras" not in doc["scenes"][0]
 
 
@@ -559,7 +502,7 @@ def test_metadata_normalised_to_json(tmp_path, garment):
     frames, faces, _ = garment
     given = OrderedDict(frames=(1, 2), scale=np.float32(0.5), count=np.int64(3), flag=np.bool_(True))
     (p,) = export_animation(tmp_path / "a.glb", frames, faces, metadata=given)
-    doc, _ = _read_gltf(p)
+    doc, _ = read_gltf(p)
     assert doc["asset"]["extras"]["garsim"] == {"frames": [1, 2], "scale": 0.5, "count": 3, "flag": True}
 
 

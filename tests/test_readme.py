@@ -13,6 +13,7 @@ Any other command fails the test.
 
 from __future__ import annotations
 
+import json
 import re
 import shlex
 import subprocess
@@ -130,6 +131,8 @@ def user_files(tmp_path_factory, anny_body):
         save_mesh(folder / "bodies" / f"{k:03d}.obj", canonical + t * (target - canonical), body_faces)
     skirt = make_garment("skirt", anny_body, target_vertices=300)
     save_mesh(folder / "skirt.obj", skirt.vertices, skirt.faces)
+    keyframes = [{"shoulder_elevation_L": -60, "shoulder_elevation_R": -60}, {"hip_flexion_L": 25}]
+    (folder / "keyframes.json").write_text(json.dumps(keyframes))
     return folder
 
 

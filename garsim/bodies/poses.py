@@ -29,6 +29,7 @@ import math
 import re
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, fields
+from pathlib import Path
 
 import numpy as np
 import roma
@@ -506,16 +507,6 @@ def walk_cycle(
 
 
 # -- motion library ------------------------------------------------------------------------------
-def _towards(
-    target: Mapping[str, np.ndarray], num_frames: int, start: Mapping[str, np.ndarray] | None = None, back: bool = True
-) -> list[dict[str, np.ndarray]]:
-    """From ``start`` (default: arms down at the sides) to ``target`` and (``back``) back again."""
-    rest = start if start is not None else STANDING
-    half = max(2, num_frames // 2 + 1) if back else num_frames
-    out = interpolate_poses(rest, {**rest, **target}, half)
-    return out + interpolate_poses({**rest, **target}, rest, num_frames - half + 2)[1:-1] if back else out
-
-
 def _pose(angles: Mapping[str, float]) -> dict[str, np.ndarray]:
     return unbatch(angles_to_pose(angles), 0)
 
@@ -525,14 +516,17 @@ STANDING: dict[str, np.ndarray] = _pose({"shoulder_elevation_L": ARMS_DOWN, "sho
 
 
 def motion(name: str, num_frames: int = 30) -> list[dict[str, np.ndarray]]:
-    """A pose sequence of the motion library: ``walk`` (one cycle), ``raise_arms``, ``turn`` (a torso twist
-    to each side), ``sit_down`` (hips and knees bend to a chair-height sit) — each ``num_frames`` poses."""
+    """A pose sequence of the motion library, ``num_frames`` poses (>= 2): ``walk`` (one cycle), ``raise_arms`` (from
+    standing, arms down, to raised forwards and back), ``turn`` (a torso twist to the left, back, to the right and
+    back), ``sit_down`` (hips and knees bend to a chair-height sit). All but the walk start from ``STANDING``: their
+    keyframes, evenly spaced over the frames (``resample_poses``)."""
     if num_frames < 2:
         raise ValueError(f"num_frames must be >= 2, got {num_frames}")
     if name == "walk":
         return walk_cycle(num_frames, include_end=False)
-    if name == "raise_arms":
-        return _towards(
+    arms_down = {"shoulder_elevation_L": ARMS_DOWN, "shoulder_elevation_R": ARMS_DOWN}
+    keyframes = {
+        "raise_arms": [
             _pose(
                 {
                     "shoulder_elevation_L": 20.0,
@@ -541,35 +535,138 @@ def motion(name: str, num_frames: int = 30) -> list[dict[str, np.ndarray]]:
                     "shoulder_flexion_R": 30.0,
                 }
             ),
-            num_frames,
-        )
-    if name == "turn":
-        left = _towards(
-            _pose({"shoulder_elevation_L": ARMS_DOWN, "shoulder_elevation_R": ARMS_DOWN, "spine_twist": 25.0}),
-            num_frames // 2,
-        )
-        right = _towards(
-            _pose({"shoulder_elevation_L": ARMS_DOWN, "shoulder_elevation_R": ARMS_DOWN, "spine_twist": -25.0}),
-            num_frames - len(left),
-        )
-        return left + right
-    if name == "sit_down":
-        return _towards(
+            STANDING,
+        ],
+        "turn": [
+            _pose({**arms_down, "spine_twist": 25.0}),
+            STANDING,
+            _pose({**arms_down, "spine_twist": -25.0}),
+            STANDING,
+        ],
+        "sit_down": [
             _pose(
                 {
-                    "shoulder_elevation_L": ARMS_DOWN,
-                    "shoulder_elevation_R": ARMS_DOWN,
+                    **arms_down,
                     "hip_flexion_L": 80.0,
                     "hip_flexion_R": 80.0,
                     "knee_flexion_L": 85.0,
                     "knee_flexion_R": 85.0,
                     "spine_flexion": 10.0,
                 }
-            ),
-            num_frames,
-            back=False,
-        )
-    raise ValueError(f"unknown motion {name!r}; choose one of {MOTIONS}")
+            )
+        ],
+    }
+    if name not in keyframes:
+        raise ValueError(f"unknown motion {name!r}; choose one of {MOTIONS}")
+    return resample_poses([STANDING, *keyframes[name]], num_frames)
 
 
 MOTIONS: tuple[str, ...] = ("walk", "raise_arms", "turn", "sit_down")
+
+
+# -- pose sequences from files -------------------------------------------------------------------
+def _as_rotvec(name: str, value: object, where: str) -> np.ndarray:
+    """One bone's rotation: axis-angle (3,) or a 3x3 / 4x4 rotation matrix -> axis-angle (3,)."""
+    try:
+        r = np.asarray(value, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise ValueError(f"{where}: bone {name!r} is not an array of numbers") from None
+    if not np.isfinite(r).all():
+        raise ValueError(f"{where}: bone {name!r} has a non-finite rotation")
+    if r.shape == (4, 4):
+        r = r[:3, :3]
+    if r.shape == (3, 3):
+        if np.abs(r @ r.T - np.eye(3)).max() > 1e-4 or np.linalg.det(r) <= 0:
+            raise ValueError(f"{where}: bone {name!r} is a 3x3 matrix that is not a rotation")
+        return roma.rotmat_to_rotvec(torch.as_tensor(r)).numpy()
+    if r.shape != (3,):
+        raise ValueError(
+            f"{where}: bone {name!r} must be an axis-angle [x, y, z] (radians) or a 3x3 / 4x4 rotation matrix, "
+            f"got shape {r.shape}"
+        )
+    return r
+
+
+def _frame_pose(frame: Mapping[str, object], where: str) -> dict[str, np.ndarray]:
+    """One frame of a pose file: Anny bones -> axis-angle, or garsim joint angles (degrees) -> axis-angle."""
+    if not isinstance(frame, Mapping) or not frame:
+        raise ValueError(f"{where}: a frame must be a non-empty object of bone (or joint-angle) names")
+    keys = set(frame)
+    angles = keys & set(angle_names())
+    if angles and angles != keys:
+        raise ValueError(f"{where}: mixes joint angles and bones ({sorted(keys - angles)[:3]}); use one kind per file")
+    if angles:
+        try:
+            values = {k: float(np.asarray(v, dtype=np.float64)) for k, v in frame.items()}
+        except (TypeError, ValueError):
+            values = {"": math.nan}
+        if not all(math.isfinite(v) for v in values.values()):
+            raise ValueError(f"{where}: every joint angle must be one finite number of degrees")
+        return unbatch(angles_to_pose(values), 0)
+    return {str(k): _as_rotvec(str(k), v, where) for k, v in frame.items()}
+
+
+def read_pose_sequence(path: str | Path) -> list[dict[str, np.ndarray]]:
+    """The frames of a pose file (bone -> axis-angle (3,) per frame, for ``AnnyBody.pose_batch``).
+
+    A ``.json`` file holds a list of frames (or ``{"frames": [...]}``); a frame maps either Anny bone names to
+    rotations in Anny's ``local-ref`` parameterisation (axis-angle ``[x, y, z]`` in radians, or a 3x3 or 4x4
+    matrix; bones left out keep Anny's rest pose, so give the arms of a T-pose yourself) or garsim's joint angles
+    (``angle_names()``, degrees, measured from the T-pose: ``{"hip_flexion_L": 30, "shoulder_elevation_L": -60}``;
+    angles left out are 0). A ``.npz`` holds one array per name: (T, 3), (T, 3, 3) or (T, 4, 4) per bone, or (T,)
+    per joint angle. Bad content raises a one-line ``ValueError`` naming the file and what to fix.
+    """
+    import json
+
+    p = Path(path)
+    if not p.is_file():
+        raise ValueError(f"{p}: no such pose file")
+    suffix = p.suffix.lower()
+    try:
+        if suffix == ".json":
+            doc = json.loads(p.read_text(encoding="utf-8"))
+            frames = doc.get("frames") if isinstance(doc, dict) else doc
+        elif suffix == ".npz":
+            with np.load(p, allow_pickle=False) as z:
+                arrays = {k: np.asarray(z[k]) for k in z.files}
+            lengths = {len(a) if a.ndim else 0 for a in arrays.values()}
+            if not arrays or len(lengths) != 1 or 0 in lengths:
+                raise ValueError(f"{p}: every array must have one row per frame (lengths {sorted(lengths)})")
+            frames = [{k: a[t] for k, a in arrays.items()} for t in range(lengths.pop())]
+        else:
+            raise ValueError(f"{p}: a pose file is .json or .npz, not {suffix or 'extension-less'}")
+    except json.JSONDecodeError as exc:
+        raise ValueError(f"{p}: not a readable pose file (JSON: {exc})") from None
+    except ValueError:
+        raise
+    except Exception as exc:  # noqa: BLE001 - truncated or foreign files raise zipfile/OS errors
+        raise ValueError(f"{p}: not a readable pose file ({type(exc).__name__}: {exc})") from None
+    if not isinstance(frames, list) or not frames:
+        raise ValueError(f'{p}: expected a non-empty list of frames (or {{"frames": [...]}})')
+    return [_frame_pose(f, f"{p} frame {t}") for t, f in enumerate(frames)]
+
+
+def resample_poses(poses: Sequence[Mapping[str, np.ndarray]], num_frames: int) -> list[dict[str, np.ndarray]]:
+    """``num_frames`` poses spread evenly over keyframes ``poses`` (the first and last kept), slerp per bone
+    between neighbouring keyframes (missing bones = identity)."""
+    if len(poses) < 1 or num_frames < 2:
+        raise ValueError(f"need at least one keyframe and num_frames >= 2, got {len(poses)} and {num_frames}")
+    if len(poses) == 1:
+        return [dict(poses[0]) for _ in range(num_frames)]
+    stacked = stack_poses(poses)
+    bones = sorted(stacked)
+    keys = torch.as_tensor(np.stack([stacked[b] for b in bones], axis=1))  # (K, bones, 3)
+    u = np.linspace(0.0, len(poses) - 1, num_frames)
+    seg = np.minimum(u.astype(int), len(poses) - 2)
+    out = []
+    for t in range(num_frames):
+        k, w = int(seg[t]), float(u[t] - seg[t])
+        r = roma.rotvec_slerp(keys[k], keys[k + 1], torch.tensor([w], dtype=torch.float64))[0].numpy()
+        out.append({b: r[j] for j, b in enumerate(bones)})
+    out[0], out[-1] = dict(poses[0]), dict(poses[-1])
+    return out
+
+
+def pose_bodies(body: AnnyBody, poses: Sequence[Mapping[str, np.ndarray]]) -> np.ndarray:
+    """Body vertices (T, V, 3) of ``body`` in each pose of a sequence."""
+    return body.pose_batch(batched_matrices(stack_poses(poses)))[0]

@@ -241,8 +241,3 @@ def atomic_write_ext(path: Path, write: Callable[[str], None]) -> Path:
                 os.unlink(named)
 
     return atomic_write(path, fill)
-
-
-def to_y_up(points: np.ndarray) -> np.ndarray:
-    """Z-up -> Y-up, (x, y, z) -> (x, z, -y), exactly (a permutation and a sign flip)."""
-    return np.stack([points[..., 0], points[..., 2], -points[..., 1]], axis=-1)

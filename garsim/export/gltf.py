@@ -28,7 +28,8 @@ from typing import Any
 import numpy as np
 
 from garsim.atomic import atomic_write_bytes
-from garsim.export._common import ExportError, check_animation, check_fps, check_output, to_y_up
+from garsim.export._common import ExportError, check_animation, check_fps, check_output
+from garsim.geometry.io import z_up_to_y_up
 
 GLTF_EXTENSIONS: tuple[str, ...] = (".glb", ".gltf")
 
@@ -159,9 +160,9 @@ def write_gltf_animation(
         raise ExportError(f"interpolation must be 'LINEAR' or 'STEP', got {interpolation!r}")
     v, f, body, u, n, meta = a.frames, a.faces, a.body, a.uvs, a.normals, a.metadata
     if y_up:
-        v = to_y_up(v)
-        n = None if n is None else to_y_up(n)
-        body = None if body is None else (to_y_up(body[0]), body[1])
+        v = z_up_to_y_up(v)
+        n = None if n is None else z_up_to_y_up(n)
+        body = None if body is None else (z_up_to_y_up(body[0]), body[1])
 
     b = _Builder()
     materials = [

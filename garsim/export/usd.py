@@ -3,9 +3,9 @@
 Stage layout: ``/Scene`` (Xform, default prim) with ``/Scene/Garment`` and, if given, ``/Scene/Body``.
 Each mesh has ``points`` (and ``extent``) sampled at time codes 0 .. T-1, triangle
 ``faceVertexCounts``/``faceVertexIndices`` (vertex order kept), ``subdivisionScheme = none``, optional
-``primvars:st`` (vertex interpolation) and ``normals``. Stage metadata: ``upAxis = Z``,
-``metersPerUnit = 1`` (garsim's convention, no conversion), ``timeCodesPerSecond = framesPerSecond = fps``,
-``startTimeCode = 0``, ``endTimeCode = T - 1``. ``.usd`` is written as binary crate (usdc).
+``primvars:st`` (vertex interpolation) and ``normals``. Stage metadata: ``upAxis`` and ``metersPerUnit`` as given
+(garsim's Z and 1 by default; the points are written as given, no conversion), ``timeCodesPerSecond =
+framesPerSecond = fps``, ``startTimeCode = 0``, ``endTimeCode = T - 1``. ``.usd`` is written as binary crate (usdc).
 
 Caller ``metadata`` (which model, smoothing, ...) goes to the root layer's ``customLayerData`` under
 ``"garsim"`` as a JSON string (USD dictionaries cannot hold lists or None), read back with
@@ -21,7 +21,14 @@ from typing import Any
 
 import numpy as np
 
-from garsim.export._common import atomic_write_ext, check_animation, check_fps, check_output, metadata_json
+from garsim.export._common import (
+    ExportError,
+    atomic_write_ext,
+    check_animation,
+    check_fps,
+    check_output,
+    metadata_json,
+)
 
 USD_EXTENSIONS: tuple[str, ...] = (".usd", ".usda", ".usdc")
 
@@ -66,10 +73,13 @@ def write_usd_animation(
     uvs: Any = None,
     normals: Any = None,
     metadata: Mapping[str, Any] | None = None,
+    up: str = "z",
+    meters_per_unit: float = 1.0,
 ) -> Path:
     """Write a garment sequence (and optional body) as an animated USD stage; returns the path.
 
-    ``frames`` (T, N, 3) Z-up metres (written as is: the stage declares upAxis Z, metersPerUnit 1);
+    ``frames`` (T, N, 3), Z-up metres by default, written as given: the stage declares ``up`` ('z' or 'y') as its
+    upAxis and ``meters_per_unit`` (e.g. 0.01 for centimetres);
     frame k is time code k and plays at ``fps``. ``uvs`` (N, 2) and ``normals`` ((N, 3) or (T, N, 3))
     belong to the garment. ``metadata``: a JSON-serialisable dict, stored as JSON text in the root layer's
     ``customLayerData["garsim"]``.
@@ -77,12 +87,14 @@ def write_usd_animation(
     p, _ = check_output(path, USD_EXTENSIONS, "write_usd_animation")
     a = check_animation(frames, faces, body_frames, body_faces, uvs, normals, metadata)
     fps = check_fps(fps)
+    if up not in ("z", "y") or not (isinstance(meters_per_unit, (int, float)) and meters_per_unit > 0):
+        raise ExportError(f"up must be 'z' or 'y' and meters_per_unit > 0, got {up!r} and {meters_per_unit!r}")
 
     from pxr import Usd, UsdGeom
 
     stage = Usd.Stage.CreateInMemory()
-    UsdGeom.SetStageUpAxis(stage, UsdGeom.Tokens.z)
-    UsdGeom.SetStageMetersPerUnit(stage, 1.0)
+    UsdGeom.SetStageUpAxis(stage, UsdGeom.Tokens.y if up == "y" else UsdGeom.Tokens.z)
+    UsdGeom.SetStageMetersPerUnit(stage, float(meters_per_unit))
     stage.SetTimeCodesPerSecond(fps)
     stage.SetFramesPerSecond(fps)
     stage.SetStartTimeCode(0.0)

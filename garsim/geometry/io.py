@@ -73,6 +73,26 @@ def y_up_to_z_up(vertices: np.ndarray) -> np.ndarray:
     return (v @ _Z_TO_Y).astype(v.dtype, copy=False)
 
 
+UNITS: dict[str, float] = {"m": 1.0, "cm": 0.01, "mm": 0.001}
+"""Length units accepted at the API boundary (metres per unit)."""
+
+
+def to_internal(vertices: np.ndarray, up: str = "z", units: str = "m") -> np.ndarray:
+    """User coordinates (``up`` axis, ``units``) -> garsim's (metres, Z up), float64."""
+    if up not in ("z", "y"):
+        raise ValueError(f"up must be 'z' or 'y', got {up!r}")
+    if units not in UNITS:
+        raise ValueError(f"units must be one of {', '.join(UNITS)}, got {units!r}")
+    v = np.asarray(vertices, dtype=np.float64) * UNITS[units]
+    return y_up_to_z_up(v) if up == "y" else v
+
+
+def from_internal(vertices: np.ndarray, up: str = "z", units: str = "m") -> np.ndarray:
+    """Inverse of :func:`to_internal` (garsim's metres, Z up -> the user's axis and units)."""
+    v = z_up_to_y_up(np.asarray(vertices, dtype=np.float64)) if up == "y" else np.asarray(vertices, dtype=np.float64)
+    return v / UNITS[units]
+
+
 def triangulate_polygons(faces: np.ndarray) -> np.ndarray:
     """Fan-triangulate an (F, k >= 3) polygon array into (F * (k - 2), 3) triangles, face by face."""
     f = np.asarray(faces)
