@@ -29,8 +29,8 @@ MESH_OUTPUTS: tuple[str, ...] = (".obj", ".ply", ".glb", ".off", ".stl")
 """What ``garsim drape --out`` writes (``garsim.geometry.io.save_mesh``)."""
 MESH_INPUTS: tuple[str, ...] = (".obj", ".ply", ".glb", ".gltf", ".off", ".stl")
 """What ``garsim drape`` reads (``garsim.geometry.io.SUPPORTED_EXTENSIONS``)."""
-ANIMATION_OUTPUTS: tuple[str, ...] = (".glb", ".gltf", ".usd", ".usda", ".usdc", ".pc2", ".mp4", ".gif")
-"""What ``garsim animate --out`` writes (``garsim.export.SUPPORTED_EXTENSIONS``)."""
+ANIMATION_OUTPUTS: tuple[str, ...] = (".glb", ".gltf", ".usd", ".usda", ".usdc", ".pc2", ".mp4", ".gif", ".npz")
+"""What ``garsim animate --out`` writes (``garsim.export.SUPPORTED_EXTENSIONS``, and ``garsim view``'s ``.npz``)."""
 SINGLE_THREAD_COMMANDS: tuple[str, ...] = ("drape", "animate")
 _THREAD_VARS = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")
 _USER_ERRORS = (ValueError, OSError, RuntimeError)
@@ -391,6 +391,17 @@ def cmd_animate(args: argparse.Namespace) -> int:
         units=args.units,
         smoothing=smoothing,
     )
+    if out.suffix.lower() == ".npz":  # garsim view's sequence: with the prior, to compare and colour by correction
+        from garsim.geometry.io import to_internal
+        from garsim.view import ViewData
+
+        prior = GarSim.prior_only().drape_sequence(
+            canonical, targets, garment, fabric=args.fabric, pinned=pinned, up=args.up, units=args.units
+        )
+        internal = [to_internal(a, args.up, args.units) for a in (frames, np.stack(targets), prior)]
+        view = ViewData(internal[0], gf, internal[1], faces, internal[2], fps=args.fps, name=out.name)
+        print(view.save_npz(out))
+        return 0
     extra = {} if uvs is None else {"uvs": uvs}
     if attributes.normals is not None:  # the garment came with normals: each frame gets its own
         from garsim.geometry.mesh import vertex_normals
@@ -676,8 +687,9 @@ def build_parser() -> argparse.ArgumentParser:
     p = command("view", "interactive browser viewer of a drape or animation (needs garsim[view])")
     p.add_argument(
         "path",
-        help="a .glb/.gltf written by garsim, an .npz with 'frames' and 'faces' (optional "
-        "'body_frames', 'body_faces', 'prior_frames'), a .pc2, an OBJ, or a folder of OBJs",
+        help="a .glb/.gltf or .usd/.usda/.usdc written by garsim, an .npz with 'frames' and 'faces' (optional "
+        "'body_frames', 'body_faces', 'prior_frames'; `garsim animate --out x.npz` writes one with the prior), a .pc2, "
+        "an OBJ, or a folder of OBJs",
     )
     p.add_argument("--port", type=int, default=8080, help="port (the next free one if taken)")
     p.add_argument("--host", default="127.0.0.1", help="address to listen on (0.0.0.0: every interface)")

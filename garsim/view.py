@@ -1,6 +1,7 @@
 """``garsim view``: an interactive browser viewer (viser) for drapes and animations.
 
-Reads a ``.glb``/``.gltf`` written by :mod:`garsim.export` (frames rebuilt from the morph targets), an ``.npz``
+Reads a ``.glb``/``.gltf`` written by :mod:`garsim.export` (frames rebuilt from the morph targets), a USD stage
+(``.usd``/``.usda``/``.usdc``: time-sampled points, in its declared axis and unit), an ``.npz``
 with ``frames`` (T, N, 3) and ``faces`` (optional ``body_frames`` (T, Vb, 3) or (Vb, 3), ``body_faces``,
 ``prior_frames`` (T, N, 3), ``fps``), a ``.pc2`` (+ the OBJ beside it, and ``<stem>_body.pc2``), one mesh
 file, or a folder of OBJs (one sequence, sorted by name; files whose name contains ``body`` / ``prior``
@@ -81,12 +82,19 @@ class ViewData:
         return int(self.frames.shape[0])
 
     def save_npz(self, path: str | Path) -> Path:
-        """Write the sequence as the ``.npz`` that ``load_npz`` (and ``garsim view``) reads; returns the path."""
-        p = Path(path)
+        """Write the sequence (atomically) as the ``.npz`` that ``load_npz`` (and ``garsim view``) reads; returns the
+        path."""
+        from garsim.atomic import atomic_write
+
         arrays = {"frames": self.frames, "faces": self.faces, "fps": np.float32(self.fps)}
         optional = {"body_frames": self.body_frames, "body_faces": self.body_faces, "prior_frames": self.prior_frames}
-        np.savez_compressed(p, **arrays, **{k: v for k, v in optional.items() if v is not None})
-        return p
+        arrays.update({k: v for k, v in optional.items() if v is not None})
+
+        def write(tmp: str) -> None:
+            with open(tmp, "wb") as fh:  # a file object: np.savez would add ".npz" to the temporary name
+                np.savez_compressed(fh, **arrays)
+
+        return atomic_write(path, write)
 
     def correction(self) -> np.ndarray | None:
         """|prediction - prior| per frame and vertex (T, N), metres; None without a prior."""
@@ -285,6 +293,59 @@ def load_obj_folder(path: str | Path) -> ViewData:
     )
 
 
+def _usd_mesh(stage: Any, prim: Any, name: str) -> tuple[np.ndarray, np.ndarray]:
+    """(T, V, 3) points over the stage's time samples (or its one default value) and (F, 3) triangles of a mesh."""
+    from pxr import UsdGeom
+
+    from garsim.geometry.io import triangulate_polygons
+
+    mesh = UsdGeom.Mesh(prim)
+    points = mesh.GetPointsAttr()
+    times = points.GetTimeSamples() or [None]
+    frames = np.stack([np.asarray(points.Get() if t is None else points.Get(t), dtype=np.float64) for t in times])
+    counts = np.asarray(mesh.GetFaceVertexCountsAttr().Get())
+    indices = np.asarray(mesh.GetFaceVertexIndicesAttr().Get(), dtype=np.int64)
+    if len(counts) == 0 or (counts != counts[0]).any() or counts[0] < 3:
+        raise ValueError(f"{name}: {prim.GetPath()} is not a mesh of triangles (or of one polygon size)")
+    return frames, triangulate_polygons(indices.reshape(-1, int(counts[0])))
+
+
+def load_usd(path: str | Path) -> ViewData:
+    """A USD stage: the mesh named ``Garment`` (else the first mesh) and ``Body`` if there is one (as
+    :mod:`garsim.export` writes them), their time-sampled points converted from the stage's upAxis and metersPerUnit
+    to Z-up metres, at the stage's time codes per second."""
+    from pxr import Usd, UsdGeom
+
+    from garsim.geometry.io import y_up_to_z_up
+
+    p = Path(path)
+    stage = Usd.Stage.Open(str(p))
+    if stage is None:
+        raise ValueError(f"{p}: not a readable USD stage")
+    meshes = {prim.GetName(): prim for prim in stage.Traverse() if prim.IsA(UsdGeom.Mesh)}
+    if not meshes:
+        raise ValueError(f"{p}: the stage holds no mesh")
+    garment = meshes.get("Garment", next(iter(meshes.values())))
+    scale = float(UsdGeom.GetStageMetersPerUnit(stage))
+
+    def internal(points: np.ndarray) -> np.ndarray:
+        v = points * scale
+        return y_up_to_z_up(v) if UsdGeom.GetStageUpAxis(stage) == UsdGeom.Tokens.y else v
+
+    frames, faces = _usd_mesh(stage, garment, p.name)
+    body = _usd_mesh(stage, meshes["Body"], p.name) if "Body" in meshes and meshes["Body"] != garment else None
+    if body is not None and len(body[0]) != len(frames):
+        body = (np.broadcast_to(body[0][:1], (len(frames), *body[0].shape[1:])), body[1])
+    return ViewData(
+        internal(frames),
+        faces,
+        body_frames=None if body is None else internal(body[0]),
+        body_faces=None if body is None else body[1],
+        fps=float(stage.GetTimeCodesPerSecond()),
+        name=p.name,
+    )
+
+
 def load_view_data(path: str | Path) -> ViewData:
     """Read any input of ``garsim view`` (see the module doc)."""
     p = Path(path)
@@ -297,6 +358,8 @@ def load_view_data(path: str | Path) -> ViewData:
         return load_gltf(p)
     if ext == ".npz":
         return load_npz(p)
+    if ext in (".usd", ".usda", ".usdc"):
+        return load_usd(p)
     if ext == ".pc2":
         from garsim.export import read_pc2
         from garsim.geometry.io import load_mesh

@@ -79,9 +79,8 @@ def test_errors_are_reported_not_raised(tmp_path, capsys):
         build_parser().parse_args(["data", "generate", "--out", "x", "--shard", "3/2"])
 
 
-@pytest.mark.slow
 def test_demo(tmp_path, capsys):
-    """The demo end to end on tiny settings: every family on both bodies, the grid, the walk animation."""
+    """The demo end to end on tiny settings (~15 s): every family on both bodies, the grid, the walk animation."""
     import struct
 
     from garsim.demo import DEMO_BODIES, DEMO_GARMENTS

@@ -170,3 +170,22 @@ def test_stdout_carries_only_the_written_paths(case, tmp_path):
     )
     assert out.returncode == 0, out.stderr[-2000:]
     assert out.stdout.splitlines() == [str(tmp_path / n) for n in ("w.pc2", "w.obj", "w_body.pc2", "w_body.obj")]
+
+
+def test_npz_output_is_the_viewers_sequence_with_the_prior(case, tmp_path):
+    """`animate --out x.npz` writes what `garsim view` reads: the drape, the body and the skinning prior, so the
+    viewer can compare them and colour the correction."""
+    from garsim.export import read_pc2
+    from garsim.view import load_view_data
+
+    folder, g, _, bodies, _ = case
+    base = ["animate", "--garment", str(folder / "skirt.obj"), "--canonical", str(folder / "canonical.obj")]
+    base += ["--targets", str(folder / "bodies.npz"), "--smoothing", "0", "--quiet"]
+    assert main([*base, "--out", str(tmp_path / "a.npz")]) == 0
+    assert main([*base, "--out", str(tmp_path / "a.pc2")]) == 0
+    assert main([*base, "--prior-only", "--out", str(tmp_path / "p.pc2")]) == 0
+    view = load_view_data(tmp_path / "a.npz")
+    np.testing.assert_allclose(view.frames, read_pc2(tmp_path / "a.pc2")[0], atol=1e-5)
+    np.testing.assert_allclose(view.prior_frames, read_pc2(tmp_path / "p.pc2")[0], atol=1e-5)
+    np.testing.assert_allclose(view.body_frames, bodies, atol=1e-5)
+    assert view.correction().max() > 0.005

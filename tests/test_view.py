@@ -88,6 +88,30 @@ def test_readers_give_the_same_sequence(tmp_path, scene, npz, glb):
         load_view_data(tmp_path / "bad.npz")
 
 
+def test_usd_in_its_declared_axis_and_unit_reads_as_z_up_metres(tmp_path, scene):
+    """A USD written Y up in centimetres (as `garsim animate --up y --units cm` does) views like the Z-up one."""
+    from garsim.export import export_animation
+    from garsim.geometry.io import from_internal
+
+    kw = {"body_faces": scene["body_faces"], "fps": 12}
+    z = export_animation(tmp_path / "z.usda", scene["frames"], scene["faces"], body_frames=scene["body_frames"], **kw)
+    y = export_animation(
+        tmp_path / "y.usdc",
+        from_internal(scene["frames"], "y", "cm"),
+        scene["faces"],
+        body_frames=from_internal(scene["body_frames"], "y", "cm"),
+        up="y",
+        units="cm",
+        **kw,
+    )
+    for path in (*z, *y):
+        d = load_view_data(path)
+        assert d.fps == 12 and d.num_frames == T
+        np.testing.assert_allclose(d.frames, scene["frames"], atol=1e-5)
+        np.testing.assert_allclose(d.body_frames, scene["body_frames"], atol=1e-5)
+        np.testing.assert_array_equal(d.faces, scene["faces"])
+
+
 def test_serve_npz_with_prior(npz, scene):
     pytest.importorskip("viser")
     from garsim.view import serve
