@@ -79,7 +79,8 @@ def _build_garment(kind: str, construction: str, body: Any, vertices: int) -> An
 
 def run_demo(config: DemoConfig, log: Callable[[str], Any] = print) -> list[Path]:
     """Drape, render and export (see the module doc); prints progress and per-drape times, returns the paths."""
-    from garsim.api import GarSim
+    from garsim import __version__
+    from garsim.api import GarSim, SequenceConfig
     from garsim.bodies.anny import AnnyBody
     from garsim.bodies.poses import EVERYDAY_LIMITS, PoseSampler, batched_matrices, motion, stack_poses
     from garsim.export import export_animation
@@ -154,9 +155,22 @@ def run_demo(config: DemoConfig, log: Callable[[str], Any] = print) -> list[Path
     prior = GarSim.prior_only().drape_sequence(canonical, targets, (garment.vertices, garment.faces), fabric=fabric)
     stem = out / f"{motion_name}_{kind}"
     t0 = time.perf_counter()
+    metadata = {
+        "generator": f"garsim {__version__} demo",
+        "model": sim.name,
+        "fabric": fabric,
+        "refine": sim.refine,
+        "temporal_smoothing_frames": SequenceConfig.smoothing if sim.model is not None else 0.0,
+    }
     for ext in (".glb", ".usdc", ".gif"):
         written += export_animation(
-            stem.with_suffix(ext), frames, garment.faces, body_frames=targets, body_faces=body.faces, fps=config.fps
+            stem.with_suffix(ext),
+            frames,
+            garment.faces,
+            metadata=metadata,
+            body_frames=targets,
+            body_faces=body.faces,
+            fps=config.fps,
         )
     view = ViewData(frames, garment.faces, targets, body.faces, prior, fps=config.fps, name=stem.name)
     npz = view.save_npz(stem.with_suffix(".npz"))
