@@ -297,6 +297,7 @@ def postprocess(
     collision_margin: float | None = 0.002,
     refine: bool = True,
     memo: Any = None,
+    fallback: bool = True,
 ) -> np.ndarray:
     """The API's post-process of a raw prediction: physical refinement (``garsim.refine``) or, with
     ``refine=False``, the push-out along the soft anchor's normal, to ``collision_margin`` metres outside the
@@ -304,7 +305,8 @@ def postprocess(
     refinement (which never moves them, so their edges are refined against where they end) and after; the
     refinement also takes the prior as its ``fallback`` for vertices the network put deep inside the body, through
     the body or on torn edges. ``memo`` (a ``garsim.refine.RefineMemo``, optional): kept by the caller between two
-    post-processes of one sample, it makes the second refinement cheaper (same result)."""
+    post-processes of one sample, it makes the second refinement cheaper (same result). ``fallback=False``: refine
+    without the prior as fallback (``drape_sequence``'s second pass)."""
     pred = np.array(pred, dtype=np.float32)
     pred[sample.pinned] = sample.prior[sample.pinned]
     if collision_margin is not None and refine:
@@ -320,7 +322,7 @@ def postprocess(
             fabric=sample_fabric(sample),
             pinned=sample.pinned,
             margin=collision_margin,
-            fallback=sample.prior,
+            fallback=sample.prior if fallback else None,
             memo=memo,
         )
     elif collision_margin is not None:
@@ -393,12 +395,12 @@ class GarSim:
         """The network's garment for a prepared sample before any post-process (the prior when there is no model)."""
         return np.array(sample.prior, dtype=np.float32) if self.model is None else self._network(sample)
 
-    def finish(self, pred: np.ndarray, sample: Sample, memo: Any = None) -> np.ndarray:
-        """This GarSim's post-process of a raw garment (:func:`postprocess`, with its optional refine ``memo``; none
-        for the bare prior)."""
+    def finish(self, pred: np.ndarray, sample: Sample, memo: Any = None, fallback: bool = True) -> np.ndarray:
+        """This GarSim's post-process of a raw garment (:func:`postprocess`, with its optional refine ``memo`` and
+        ``fallback``; none for the bare prior)."""
         if self.model is None and not self.refine:
             return np.array(pred, dtype=np.float32)
-        return postprocess(pred, sample, self.collision_margin, self.refine, memo=memo)
+        return postprocess(pred, sample, self.collision_margin, self.refine, memo=memo, fallback=fallback)
 
     def predict(self, sample: Sample) -> np.ndarray:
         """The model's garment for a prepared sample (the prior when there is no model), post-processed."""
@@ -542,5 +544,7 @@ class GarSim:
                 bar.update()
             if twice:  # the refinement's own frame-to-frame changes, smoothed
                 again = smooth_corrections(np.stack(done), priors, sigma)
-                done = [self.finish(p, s, m) for s, p, m in zip(samples, again, memos)]
+                # without the fallback: the first pass handed what needed it to the prior, the smoothing spread that
+                # over time; handing patches to it again here would bring back the jumps the smoothing removed
+                done = [self.finish(p, s, m, fallback=False) for s, p, m in zip(samples, again, memos)]
         return np.stack([from_internal(f, up, units).astype(np.float32) for f in done])
