@@ -229,7 +229,7 @@ def test_cli_choices_match_the_library():
 
     assert FABRIC_CHOICES == FABRICS and MOTION_CHOICES == MOTIONS and set(MODEL_CHOICES) == set(MODELS)
     assert FAMILY_CHOICES == GARMENT_TYPES
-    assert set(ANIMATION_OUTPUTS) == set(SUPPORTED_EXTENSIONS)
+    assert set(ANIMATION_OUTPUTS) == set(SUPPORTED_EXTENSIONS) | {".npz"}  # .npz: the viewer's sequence
     assert set(MESH_OUTPUTS) == set(MESH_EXTENSIONS) - {".gltf"} and set(MESH_INPUTS) == set(MESH_EXTENSIONS)
 
 
