@@ -27,7 +27,7 @@ import numpy as np
 
 from garsim.api import GarSim
 from garsim.data.store import DatasetStore
-from garsim.eval.metrics import constraint_figures, euclidean_error_mm
+from garsim.eval.metrics import MIN_REST, constraint_figures, euclidean_error_mm
 
 BOUNDS = {"max_stretch": 1.5, "p99_stretch": 1.15, "inside_pct": 0.5, "edges_through_pct": 0.2}
 """The issue's bounds on the refined drapes."""
@@ -154,7 +154,7 @@ def main() -> None:
     args = p.parse_args()
     load = (lambda **kw: GarSim.load(args.model, **kw)) if args.model else GarSim.pretrained
     sims = {"raw": load(collision_margin=None), "refined": load()}
-    report: dict = {"model": args.model or "shipped", "bounds": BOUNDS, "min_rest_m": 0.005}
+    report: dict = {"model": args.model or "shipped", "bounds": BOUNDS, "min_rest_m": MIN_REST}
     if args.external.exists():
         report["external"] = score(external_cases(args.external), sims)
         print_table(f"external set ({args.external})", report["external"])

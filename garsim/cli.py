@@ -415,8 +415,8 @@ def cmd_animate(args: argparse.Namespace) -> int:
         "fabric": args.fabric,
         "refine": sim.refine,
         "temporal_smoothing_frames": smoothing if sim.model is not None else 0.0,  # the bare prior is never smoothed
-        "up": args.up,
-        "units": args.units,
+        "input_up": args.up,  # glTF and the previews are converted to Y-up / Z-up metres; USD declares its own
+        "input_units": args.units,
     }
     written = export_animation(
         out,

@@ -72,7 +72,10 @@ triangles are skipped by the search); where it intersects itself (a posed body's
 nearest surface can be that of the other part. Stretch and contact can conflict (a pinned vertex inside
 the body, a garment too small for the body, cloth tangled with a limb): contact wins. Pinned vertices that the
 prior stretched apart (a long-sleeve's neckline) leave the edges between them and their neighbours over the
-limit whatever the sweeps do: such a garment always runs ``MAX_ROUNDS`` rounds.
+limit whatever the sweeps do: such a garment always runs ``MAX_ROUNDS`` rounds, and ``MAX_TORN_ROUNDS`` when those
+edges are over ``TORN_STRETCH``. The hand-over of edges still through the body after the rounds is a yes/no decision
+(its weight is 1 from the surface on): a drape whose last round leaves one edge through and a nearly identical one
+that leaves none can differ by the patch's blend towards the fallback.
 """
 
 from __future__ import annotations
@@ -746,9 +749,10 @@ class _State:
         return bool(self.buf["hit"].numpy().any())
 
     def torn(self) -> bool:
-        """Whether an edge with a free end is longer than ``TORN_STRETCH`` x its rest length."""
+        """Whether an edge with a free end is longer than ``TORN_STRETCH`` x its rest length (and its own limit)."""
         x, e = self.x, self.con.stretch_edges
-        return bool((np.linalg.norm(x[e[:, 1]] - x[e[:, 0]], axis=1) > TORN_STRETCH * self.con.rest).any())
+        bound = np.maximum(TORN_STRETCH * self.con.rest, self.con.limit)
+        return bool((np.linalg.norm(x[e[:, 1]] - x[e[:, 0]], axis=1) > bound).any())
 
     def project_contacts(self) -> bool:
         """Move every mobile vertex closer than the margin to it along its normal; False if there was none."""

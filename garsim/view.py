@@ -334,8 +334,10 @@ def load_usd(path: str | Path) -> ViewData:
 
     frames, faces = _usd_mesh(stage, garment, p.name)
     body = _usd_mesh(stage, meshes["Body"], p.name) if "Body" in meshes and meshes["Body"] != garment else None
-    if body is not None and len(body[0]) != len(frames):
-        body = (np.broadcast_to(body[0][:1], (len(frames), *body[0].shape[1:])), body[1])
+    if body is not None and len(body[0]) == 1 < len(frames):  # a body held still
+        body = (np.broadcast_to(body[0], (len(frames), *body[0].shape[1:])), body[1])
+    elif body is not None and len(body[0]) != len(frames):
+        raise ValueError(f"{p.name}: the Body has {len(body[0])} time samples, the Garment {len(frames)}")
     return ViewData(
         internal(frames),
         faces,

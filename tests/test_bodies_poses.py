@@ -275,10 +275,11 @@ def test_walk_cycle_is_periodic_and_counter_phased(body, axes, dominant, checker
         P.walk_cycle(8, stride=3.0)
 
 
-@pytest.mark.parametrize("num_frames", [2, 3, 5, 30])
-def test_motion_library_any_length(num_frames):
-    """Every motion gives the frames asked for; all but the walk start standing, arms down; the turn twists to the
-    left first, then to the right; the sit ends seated (hips and knees bent)."""
+@pytest.mark.parametrize("num_frames", [5, 6, 30])
+def test_motion_library_passes_its_keyframes(num_frames):
+    """Every motion gives the frames asked for and shows each of its keyframes: all but the walk start standing,
+    arms down; the arms reach their raised pose; the turn twists fully to the left, then to the right; the sit ends
+    seated (hips and knees bent). Fewer frames than keyframes are refused."""
     from garsim.bodies.poses import MOTIONS, STANDING, motion
 
     for name in MOTIONS:
@@ -287,10 +288,15 @@ def test_motion_library_any_length(num_frames):
         if name != "walk":
             for bone, r in STANDING.items():
                 np.testing.assert_allclose(frames[0][bone], r, atol=1e-12)
-    twist = [float(p["spine01"][2]) for p in motion("turn", 9)]
-    assert max(twist[:4]) > 0.08 and min(twist[4:]) < -0.08 and np.argmax(twist) < np.argmin(twist)
+    twist = np.array([float(p["spine01"][2]) for p in motion("turn", num_frames)])
+    assert twist.max() == pytest.approx(np.radians(5.0), abs=1e-9) and twist.min() == pytest.approx(-twist.max())
+    assert np.argmax(twist) < np.argmin(twist)
+    raised = max(float(np.linalg.norm(p["upperarm01.L"] - STANDING["upperarm01.L"])) for p in motion("raise_arms", 6))
+    assert raised > np.radians(60)
     seated = motion("sit_down", num_frames)[-1]
     assert np.linalg.norm(seated["upperleg01.L"]) > np.radians(70) and np.linalg.norm(seated["lowerleg01.L"]) > 1.0
+    with pytest.raises(ValueError, match="at least 5 frames"):
+        motion("turn", 3)
     with pytest.raises(ValueError, match="unknown motion"):
         motion("dance", 4)
 
@@ -304,7 +310,11 @@ def test_resample_poses_keeps_keyframes_and_slerps_between():
     out = resample_poses([a, b, c], 5)
     np.testing.assert_allclose([p["neck01"] for p in out[::2]], [a["neck01"], b["neck01"], c["neck01"]], atol=1e-12)
     np.testing.assert_allclose(out[1]["neck01"], [0.0, 0.0, 0.4], atol=1e-12)  # half way, about one axis
+    even = resample_poses([a, b, c], 4)  # keyframes on frames 0, 2 (round(1.5)) and 3: the middle one still shown
+    np.testing.assert_allclose(even[2]["neck01"], b["neck01"], atol=1e-12)
     assert len(resample_poses([a], 3)) == 3
+    with pytest.raises(ValueError, match="at least 3 frames"):
+        resample_poses([a, b, c], 2)
 
 
 def test_read_pose_sequence_formats_agree(tmp_path):
@@ -335,3 +345,9 @@ def test_read_pose_sequence_formats_agree(tmp_path):
     np.savez(tmp_path / "ragged.npz", neck01=rv, spine01=rv[:1])
     with pytest.raises(ValueError, match="one row per frame"):
         read_pose_sequence(tmp_path / "ragged.npz")
+    (tmp_path / "mixed.json").write_text(json.dumps([{"neck01": [0, 0, 0]}, {"hip_flexion_L": 10}]))
+    with pytest.raises(ValueError, match="frame 1 uses other names than frame 0"):
+        read_pose_sequence(tmp_path / "mixed.json")
+    (tmp_path / "latin1.json").write_bytes(b'[{"neck01": [0, 0, 0]}] \xe9')
+    with pytest.raises(ValueError, match="latin1.json: not a readable pose file"):
+        read_pose_sequence(tmp_path / "latin1.json")

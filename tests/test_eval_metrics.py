@@ -115,3 +115,26 @@ def test_garment_metrics_reports_every_metric():
     assert m["inside_pct"] == m["hood_collision_pct"] == m["collision_pct"] == 100.0  # shrunk to 0.6: all inside
     assert m["edge_crossing_pct"] == 0.0  # inside, but no edge meets the surface
     assert np.isclose(m["euclidean_mm"], 600.0) and m["edge_length_error_mm"] > 0
+
+
+def test_constraint_figures_hand_computed():
+    """Three triangles (a 10 cm square and a sliver) beside a unit box: vertex 3 moved 15 cm into the box stretches
+    edge 2-3 to 2.5x and 0-3 to 1.8x; the pinned-pinned edge 0-1 and the 2 mm seam edge 3-4 are left out."""
+    from garsim.eval.metrics import constraint_figures
+
+    box = trimesh.creation.box(extents=(1.0, 1.0, 1.0))
+    bv, bf = np.asarray(box.vertices), np.asarray(box.faces)
+    tpl = np.array([[0.6, 0.0, 0.0], [0.7, 0.0, 0.0], [0.7, 0.1, 0.0], [0.6, 0.1, 0.0], [0.6, 0.102, 0.0]])
+    faces = np.array([[0, 1, 2], [0, 2, 3], [3, 2, 4]])
+    pinned = np.array([True, True, False, False, False])
+    x = tpl.copy()
+    x[3] = [0.45, 0.1, 0.0]  # inside the box (|x| < 0.5)
+    ratios: list = []
+    fig = constraint_figures(x[None], tpl, faces, pinned, bv[None], bf, ratios_out=ratios)
+    # counted edges 0-2, 0-3, 1-2, 2-3, 2-4: ratios 1, 0.18 / 0.1, 1, 0.25 / 0.1, 1
+    np.testing.assert_allclose(np.sort(ratios[0]), [1.0, 1.0, 1.0, np.hypot(0.15, 0.1) / 0.1, 2.5], atol=1e-9)
+    assert fig["max_stretch"] == pytest.approx(2.5) and fig["edges_over_1.5_pct"] == pytest.approx(40.0)
+    assert fig["inside_pct"] == pytest.approx(20.0) and fig["inside_free_pct"] == pytest.approx(100.0 / 3)
+    # edges meeting the box: the three at vertex 3 (0-3, 2-3, 3-4) of seven; of the free ones (2-3, 2-4, 3-4): two
+    assert fig["edges_through_pct"] == pytest.approx(300.0 / 7)
+    assert fig["edges_through_free_pct"] == pytest.approx(200.0 / 3)

@@ -518,8 +518,9 @@ STANDING: dict[str, np.ndarray] = _pose({"shoulder_elevation_L": ARMS_DOWN, "sho
 def motion(name: str, num_frames: int = 30) -> list[dict[str, np.ndarray]]:
     """A pose sequence of the motion library, ``num_frames`` poses (>= 2): ``walk`` (one cycle), ``raise_arms`` (from
     standing, arms down, to raised forwards and back), ``turn`` (a torso twist to the left, back, to the right and
-    back), ``sit_down`` (hips and knees bend to a chair-height sit). All but the walk start from ``STANDING``: their
-    keyframes, evenly spaced over the frames (``resample_poses``)."""
+    back), ``sit_down`` (hips and knees bend to a chair-height sit). All but the walk start from ``STANDING`` and pass
+    through their keyframes on whole frames (``resample_poses``), so they need at least as many frames as keyframes
+    (raise_arms 3, turn 5, sit_down 2)."""
     if num_frames < 2:
         raise ValueError(f"num_frames must be >= 2, got {num_frames}")
     if name == "walk":
@@ -565,22 +566,26 @@ MOTIONS: tuple[str, ...] = ("walk", "raise_arms", "turn", "sit_down")
 
 
 # -- pose sequences from files -------------------------------------------------------------------
+class PoseFileError(ValueError):
+    """A pose file garsim cannot read; the message names the file and what to fix."""
+
+
 def _as_rotvec(name: str, value: object, where: str) -> np.ndarray:
     """One bone's rotation: axis-angle (3,) or a 3x3 / 4x4 rotation matrix -> axis-angle (3,)."""
     try:
         r = np.asarray(value, dtype=np.float64)
     except (TypeError, ValueError):
-        raise ValueError(f"{where}: bone {name!r} is not an array of numbers") from None
+        raise PoseFileError(f"{where}: bone {name!r} is not an array of numbers") from None
     if not np.isfinite(r).all():
-        raise ValueError(f"{where}: bone {name!r} has a non-finite rotation")
+        raise PoseFileError(f"{where}: bone {name!r} has a non-finite rotation")
     if r.shape == (4, 4):
         r = r[:3, :3]
     if r.shape == (3, 3):
         if np.abs(r @ r.T - np.eye(3)).max() > 1e-4 or np.linalg.det(r) <= 0:
-            raise ValueError(f"{where}: bone {name!r} is a 3x3 matrix that is not a rotation")
+            raise PoseFileError(f"{where}: bone {name!r} is a matrix that is not a rotation (orthonormal, det 1)")
         return roma.rotmat_to_rotvec(torch.as_tensor(r)).numpy()
     if r.shape != (3,):
-        raise ValueError(
+        raise PoseFileError(
             f"{where}: bone {name!r} must be an axis-angle [x, y, z] (radians) or a 3x3 / 4x4 rotation matrix, "
             f"got shape {r.shape}"
         )
@@ -590,18 +595,20 @@ def _as_rotvec(name: str, value: object, where: str) -> np.ndarray:
 def _frame_pose(frame: Mapping[str, object], where: str) -> dict[str, np.ndarray]:
     """One frame of a pose file: Anny bones -> axis-angle, or garsim joint angles (degrees) -> axis-angle."""
     if not isinstance(frame, Mapping) or not frame:
-        raise ValueError(f"{where}: a frame must be a non-empty object of bone (or joint-angle) names")
+        raise PoseFileError(f"{where}: a frame must be a non-empty object of bone (or joint-angle) names")
     keys = set(frame)
     angles = keys & set(angle_names())
     if angles and angles != keys:
-        raise ValueError(f"{where}: mixes joint angles and bones ({sorted(keys - angles)[:3]}); use one kind per file")
+        raise PoseFileError(
+            f"{where}: mixes joint angles and bones ({sorted(keys - angles)[:3]}); use one kind per file"
+        )
     if angles:
         try:
             values = {k: float(np.asarray(v, dtype=np.float64)) for k, v in frame.items()}
         except (TypeError, ValueError):
             values = {"": math.nan}
         if not all(math.isfinite(v) for v in values.values()):
-            raise ValueError(f"{where}: every joint angle must be one finite number of degrees")
+            raise PoseFileError(f"{where}: every joint angle must be one finite number of degrees")
         return unbatch(angles_to_pose(values), 0)
     return {str(k): _as_rotvec(str(k), v, where) for k, v in frame.items()}
 
@@ -614,13 +621,14 @@ def read_pose_sequence(path: str | Path) -> list[dict[str, np.ndarray]]:
     matrix; bones left out keep Anny's rest pose, so give the arms of a T-pose yourself) or garsim's joint angles
     (``angle_names()``, degrees, measured from the T-pose: ``{"hip_flexion_L": 30, "shoulder_elevation_L": -60}``;
     angles left out are 0). A ``.npz`` holds one array per name: (T, 3), (T, 3, 3) or (T, 4, 4) per bone, or (T,)
-    per joint angle. Bad content raises a one-line ``ValueError`` naming the file and what to fix.
+    per joint angle, one kind per file. Bad content raises a one-line ``PoseFileError`` (a ``ValueError``) naming the
+    file and what to fix.
     """
     import json
 
     p = Path(path)
     if not p.is_file():
-        raise ValueError(f"{p}: no such pose file")
+        raise PoseFileError(f"{p}: no such pose file")
     suffix = p.suffix.lower()
     try:
         if suffix == ".json":
@@ -631,39 +639,48 @@ def read_pose_sequence(path: str | Path) -> list[dict[str, np.ndarray]]:
                 arrays = {k: np.asarray(z[k]) for k in z.files}
             lengths = {len(a) if a.ndim else 0 for a in arrays.values()}
             if not arrays or len(lengths) != 1 or 0 in lengths:
-                raise ValueError(f"{p}: every array must have one row per frame (lengths {sorted(lengths)})")
+                raise PoseFileError(f"{p}: every array must have one row per frame (lengths {sorted(lengths)})")
             frames = [{k: a[t] for k, a in arrays.items()} for t in range(lengths.pop())]
         else:
-            raise ValueError(f"{p}: a pose file is .json or .npz, not {suffix or 'extension-less'}")
-    except json.JSONDecodeError as exc:
-        raise ValueError(f"{p}: not a readable pose file (JSON: {exc})") from None
-    except ValueError:
+            raise PoseFileError(f"{p}: a pose file is .json or .npz, not {suffix or 'extension-less'}")
+    except PoseFileError:
         raise
-    except Exception as exc:  # noqa: BLE001 - truncated or foreign files raise zipfile/OS errors
-        raise ValueError(f"{p}: not a readable pose file ({type(exc).__name__}: {exc})") from None
+    except Exception as exc:  # noqa: BLE001 - truncated, foreign or non-UTF-8 files raise json/zipfile/OS errors
+        raise PoseFileError(f"{p}: not a readable pose file ({type(exc).__name__}: {exc})") from None
     if not isinstance(frames, list) or not frames:
-        raise ValueError(f'{p}: expected a non-empty list of frames (or {{"frames": [...]}})')
-    return [_frame_pose(f, f"{p} frame {t}") for t, f in enumerate(frames)]
+        raise PoseFileError(f'{p}: expected a non-empty list of frames (or {{"frames": [...]}})')
+    out = [_frame_pose(f, f"{p} frame {t}") for t, f in enumerate(frames)]
+    angles = [bool(set(f) & set(angle_names())) for f in frames]
+    if len(set(angles)) > 1:
+        raise PoseFileError(
+            f"{p}: frame {angles.index(not angles[0])} uses other names than frame 0 (joint angles vs "
+            "Anny bones); use one kind per file"
+        )
+    return out
 
 
 def resample_poses(poses: Sequence[Mapping[str, np.ndarray]], num_frames: int) -> list[dict[str, np.ndarray]]:
-    """``num_frames`` poses spread evenly over keyframes ``poses`` (the first and last kept), slerp per bone
-    between neighbouring keyframes (missing bones = identity)."""
-    if len(poses) < 1 or num_frames < 2:
-        raise ValueError(f"need at least one keyframe and num_frames >= 2, got {len(poses)} and {num_frames}")
+    """``num_frames`` poses through keyframes ``poses``: keyframe k lands on frame round(k (T - 1) / (K - 1)), so
+    every keyframe is shown exactly, and the frames between two keyframes slerp per bone between them (missing bones
+    = identity). Needs ``num_frames`` >= the number of keyframes (one keyframe: held)."""
+    if len(poses) < 1 or num_frames < max(2, len(poses)):
+        raise ValueError(
+            f"{len(poses)} keyframes need at least {max(2, len(poses))} frames (each keyframe on its own), "
+            f"got {num_frames}"
+        )
     if len(poses) == 1:
         return [dict(poses[0]) for _ in range(num_frames)]
     stacked = stack_poses(poses)
     bones = sorted(stacked)
     keys = torch.as_tensor(np.stack([stacked[b] for b in bones], axis=1))  # (K, bones, 3)
-    u = np.linspace(0.0, len(poses) - 1, num_frames)
-    seg = np.minimum(u.astype(int), len(poses) - 2)
+    at = np.round(np.linspace(0.0, num_frames - 1, len(poses))).astype(int)  # the keyframes' frames, increasing
     out = []
-    for t in range(num_frames):
-        k, w = int(seg[t]), float(u[t] - seg[t])
-        r = roma.rotvec_slerp(keys[k], keys[k + 1], torch.tensor([w], dtype=torch.float64))[0].numpy()
-        out.append({b: r[j] for j, b in enumerate(bones)})
-    out[0], out[-1] = dict(poses[0]), dict(poses[-1])
+    for k in range(len(poses) - 1):
+        steps = (np.arange(at[k], at[k + 1]) - at[k]) / (at[k + 1] - at[k])
+        r = roma.rotvec_slerp(keys[k], keys[k + 1], torch.as_tensor(steps, dtype=torch.float64)).numpy()
+        out += [{b: r[t, j] for j, b in enumerate(bones)} for t in range(len(steps))]
+        out[at[k]] = {b: keys[k, j].numpy() for j, b in enumerate(bones)}  # exact keyframe (slerp's round trip)
+    out.append({b: keys[-1, j].numpy() for j, b in enumerate(bones)})
     return out
 
 

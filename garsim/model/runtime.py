@@ -244,7 +244,7 @@ class GarSimRuntime:
         uniform = bool((fabric == fabric[:1]).all())  # one fabric per garment: FiLM once, broadcast
         # per-chunk work buffers, reused by every chunk and step: the edge rows outnumber the nodes ~6:1, and a
         # chunk's intermediates stay in the core's cache (whole-array passes were ~20% slower at 2,400 vertices)
-        rows = min(n_edges, EDGE_CHUNK)
+        rows = max(1, min(n_edges, EDGE_CHUNK))
         hid_buf = np.empty((rows, self.steps[0][3].shape[0]), dtype=np.float32)
         gathered = np.empty_like(hid_buf)
         new_edge = np.empty_like(edge)
