@@ -191,6 +191,21 @@ def test_killing_the_parent_leaves_no_worker(tmp_path):
     assert not alive, f"workers {alive} outlived their parent"
 
 
+_FINISH_SCRIPT = """
+from garsim.physics.generate import _worker_pool
+with _worker_pool(2) as pool:
+    print(sum(pool.imap_unordered(abs, range(-45, 0))), flush=True)  # 45 tasks: workers recycled every 10
+print("exited", flush=True)
+"""
+
+
+def test_a_finished_pool_exits_and_reaps_its_workers():
+    """A run whose jobs are all done leaves the pool (closed and joined, its recycled workers reaped) and returns:
+    Pool.__exit__'s terminate() once left a finished generator asleep for good on the task queue's lock."""
+    out = subprocess.run([sys.executable, "-c", _FINISH_SCRIPT], capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0 and out.stdout.split() == [str(sum(range(1, 46))), "exited"], out.stderr[-2000:]
+
+
 def test_armhole_poses_keep_the_arms_near_their_canonical_position(tmp_path, monkeypatch):
     """Shoulder elevation is the sampler's angle (0 = T-pose), the canonical arm is degrees above the A-pose:
     the everyday range of a garment with armholes is centred on its canonical arms, in the sampler's angle."""

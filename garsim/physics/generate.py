@@ -21,13 +21,11 @@ failed write, a killed worker) is logged and retried on the next run.
 from __future__ import annotations
 
 import contextlib
-import ctypes
 import json
 import logging
 import math
 import multiprocessing as mp
 import os
-import signal
 import time
 import traceback
 from collections import Counter
@@ -638,15 +636,25 @@ def generate(config: GenerateConfig, progress: bool = True) -> dict[str, Any]:
 
 
 _THREAD_VARS = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")
-_PR_SET_PDEATHSIG = 1
 
 
 def _worker_init(parent: int) -> None:
-    """Worker initializer: die with the parent (Linux PR_SET_PDEATHSIG, set first), one torch/BLAS thread."""
-    with contextlib.suppress(OSError, AttributeError):
-        ctypes.CDLL("libc.so.6", use_errno=True).prctl(_PR_SET_PDEATHSIG, int(signal.SIGKILL))
-    if os.getppid() != parent:  # the parent died before the signal was armed
+    """Worker initializer: die with the parent (a watchdog thread polls the parent pid), one torch/BLAS thread.
+
+    Not PR_SET_PDEATHSIG: it fires when the parent *thread* ends, and the pool's handler thread, which starts the
+    workers that replace recycled ones, ends when the pool closes; its workers were then killed while waiting on the
+    task queue, holding its lock, and the parent hung for good on that lock (seen here after a finished run)."""
+    import threading
+
+    if os.getppid() != parent:  # the parent died before the watchdog was armed
         os._exit(1)
+
+    def watchdog() -> None:
+        while os.getppid() == parent:
+            time.sleep(0.5)
+        os._exit(1)
+
+    threading.Thread(target=watchdog, name="garsim-parent-watchdog", daemon=True).start()
     import torch
 
     torch.set_num_threads(1)
@@ -661,10 +669,16 @@ def _worker_pool(workers: int) -> Iterator[Any]:
     saved = {k: os.environ.get(k) for k in _THREAD_VARS}
     os.environ.update({k: "1" for k in _THREAD_VARS})
     try:
-        with mp.get_context("spawn").Pool(
+        pool = mp.get_context("spawn").Pool(
             workers, initializer=_worker_init, initargs=(os.getpid(),), maxtasksperchild=10
-        ) as pool:
+        )
+        try:
             yield pool
+        except BaseException:
+            pool.terminate()
+            raise
+        pool.close()  # a finished run lets its workers finish and waits for them (terminate() is for failures)
+        pool.join()
     finally:
         for k, v in saved.items():
             if v is None:
