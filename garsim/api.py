@@ -406,6 +406,18 @@ class GarSim:
         """The model's garment for a prepared sample (the prior when there is no model), post-processed."""
         return self.finish(self.raw(sample), sample)
 
+    def sequence_metadata(self, fabric: Any, smoothing: float) -> dict[str, Any]:
+        """What made a ``drape_sequence`` result, for an exported file's metadata (the bare prior is never smoothed)."""
+        from garsim import __version__
+
+        return {
+            "generator": f"garsim {__version__}",
+            "model": self.name,
+            "fabric": fabric,
+            "refine": self.refine,
+            "temporal_smoothing_frames": float(smoothing) if self.model is not None else 0.0,
+        }
+
     @property
     def name(self) -> str:
         base = "GarSim model" if self.model is not None else "skinning prior"

@@ -407,14 +407,8 @@ def cmd_animate(args: argparse.Namespace) -> int:
         from garsim.geometry.mesh import vertex_normals
 
         extra["normals"] = np.stack([vertex_normals(f, gf) for f in frames]).astype(np.float32)
-    from garsim import __version__
-
     metadata = {
-        "generator": f"garsim {__version__}",
-        "model": sim.name,
-        "fabric": args.fabric,
-        "refine": sim.refine,
-        "temporal_smoothing_frames": smoothing if sim.model is not None else 0.0,  # the bare prior is never smoothed
+        **sim.sequence_metadata(args.fabric, smoothing),
         "input_up": args.up,  # glTF and the previews are converted to Y-up / Z-up metres; USD declares its own
         "input_units": args.units,
     }

@@ -79,7 +79,6 @@ def _build_garment(kind: str, construction: str, body: Any, vertices: int) -> An
 
 def run_demo(config: DemoConfig, log: Callable[[str], Any] = print) -> list[Path]:
     """Drape, render and export (see the module doc); prints progress and per-drape times, returns the paths."""
-    from garsim import __version__
     from garsim.api import GarSim, SequenceConfig
     from garsim.bodies.anny import AnnyBody
     from garsim.bodies.poses import EVERYDAY_LIMITS, PoseSampler, batched_matrices, motion, stack_poses
@@ -155,13 +154,7 @@ def run_demo(config: DemoConfig, log: Callable[[str], Any] = print) -> list[Path
     prior = GarSim.prior_only().drape_sequence(canonical, targets, (garment.vertices, garment.faces), fabric=fabric)
     stem = out / f"{motion_name}_{kind}"
     t0 = time.perf_counter()
-    metadata = {
-        "generator": f"garsim {__version__} demo",
-        "model": sim.name,
-        "fabric": fabric,
-        "refine": sim.refine,
-        "temporal_smoothing_frames": SequenceConfig.smoothing if sim.model is not None else 0.0,
-    }
+    metadata = sim.sequence_metadata(fabric, SequenceConfig.smoothing)
     for ext in (".glb", ".usdc", ".gif"):
         written += export_animation(
             stem.with_suffix(ext),
