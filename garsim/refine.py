@@ -20,7 +20,9 @@ gets wrong and a viewer notices, and leaves everything else exactly where the ne
     through the cloth between two shallow vertices), with a weight that rises smoothly with the depth (0 at
     ``FALLBACK_DEPTH``, 1 at ``FALLBACK_DEPTH`` + ``FALLBACK_RAMP``), or on a torn edge (over ``FALLBACK_STRETCH``
     x its rest length, weight 1 at ``FALLBACK_STRETCH`` + ``FALLBACK_STRETCH_RAMP``); the weight is spread over a
-    few rings of the mesh (so a patch moves as a whole and fades out at its border). Pushed out to its own
+    few rings of the mesh (so a patch moves as a whole and fades out at its border), and further out where the
+    fade would stretch an edge past ``FALLBACK_BORDER`` x its rest length (a patch far from the fallback fades
+    over as many rings as it needs, not only those few). Pushed out to its own
     nearest surface point, a patch sunk past a limb's centre line wraps the limb's far side (stretched
     ~R / (R - depth), neighbours on opposite sides, edges through it); a sleeve wall with the wrist through it
     is pushed out on both sides of the wrist; a torn patch pulled back by (a) is dragged straight across the
@@ -41,8 +43,8 @@ near the surface; rounds repeat until nothing is violated, at most ``MAX_ROUNDS`
 prediction tangled with the body is improved, not solved), or up to ``MAX_TORN_ROUNDS`` of longer rounds while an
 edge with a free end is still over ``TORN_STRETCH`` x its rest length (a torn prediction gets the sweeps it needs to
 close); an edge still through the obstacle after them hands its patch to the ``fallback`` at any depth (the edge
-samples could not push it off: a hand or forearm between two vertices of a coarse hem) and the rounds run again;
-and a final exact contact projection guarantees the margin (contact wins over stretch where they conflict).
+samples could not push it off: a hand or forearm between two vertices of a coarse hem) and the rounds run again, up
+to ``MAX_HANDOVERS`` times; and a final exact contact projection guarantees the margin (contact wins over stretch where they conflict).
 
 Closest point on the obstacle (``garsim.geometry.inside.Obstacle``, the one exact query garsim has): a
 warp BVH over the obstacle's triangles (float32) finds each point's
@@ -106,13 +108,19 @@ MAX_TORN_ROUNDS = 16
 """... then the rounds go on, up to this many in all, while it is (a prediction torn far past the limit, e.g. a leg
 through trousers: on the external set's trousers 4 rounds left 3.2x edges and a 99th percentile of 1.29x, these
 rounds 1.6x and 1.14x; a valid or near-valid drape never gets here) ..."""
+TORN_SWEEPS = 3
+"""... each of those rounds with this many times ``iterations`` sweeps (the tear closes over the sweeps, the contact
+queries between rounds matter less)."""
 EDGE_DEPTH_FROM = -0.01
 """m: after the rounds, an edge still through the obstacle is handed to the fallback with a weight rising from 0 at
 this depth of its deepest sample (negative: outside) to 1 ``FALLBACK_RAMP`` deeper, so fully from the surface on (on
 the test split 0.21% of edges stayed through with 0, 0.09% with -1 cm; on the external set 0.14% and 0.05%)."""
-TORN_SWEEPS = 3
-"""... each of those rounds with this many times ``iterations`` sweeps (the tear closes over the sweeps, the contact
-queries between rounds matter less)."""
+MAX_HANDOVERS = 4
+"""... at most this many times, each hand-over followed by the rounds (a hand-over's rounds can leave edges through
+again next to the patch: one hand-over left 16 edges through and a 1.8x edge on a test long-sleeve, four none) ..."""
+HANDOVER_BORDER = 1.1
+"""... with the fade of each hand-over's patch kept within this x rest length (see ``FALLBACK_BORDER``; a hand-over
+patch is where the network already failed, so it fades wider than the first blend's)."""
 EDGE_SAMPLES = (0.125, 0.25, 0.375, 0.5, 0.625, 0.75, 0.875)
 """Edge parameters of the samples that push an edge out of the obstacle for (c)."""
 SAMPLE_CLEARANCE = 0.1
@@ -135,6 +143,14 @@ FALLBACK_STRETCH_RAMP = 1.0
 """... fully once the edge is this much (x rest length) longer (a smoothstep in between)."""
 FALLBACK_PASSES = 4
 """Passes that spread the fallback weight over the mesh (w = max(w, mean of w over the closed one-ring))."""
+FALLBACK_BORDER = 1.5
+"""x rest length: then, where the fade would stretch an edge past this (and past both its length in the prediction
+and in the fallback), the weight at its lower end is raised just enough to keep it there (the smaller root of a
+quadratic), and so on outwards: the fade widens only where the patch moves far from its neighbours (the 4 rings
+alone tore the border of a long-sleeve's blended forearm patch from 5.2x to 10x, which the sweeps then could not
+close against the contacts) ..."""
+FALLBACK_WIDEN_PASSES = 64
+"""... over at most this many Jacobi passes (each widens the fade by one ring; they stop once nothing changes)."""
 _STRETCH_TOL = 1e-3  # relative: an edge within limit * (1 + this) counts as satisfied
 _DIST_TOL = 1e-6  # m
 _RAMP = 0.01  # a constraint counts fully in the averaging once violated by this x its limit (x BAND for samples)
@@ -389,6 +405,17 @@ def _kernels() -> SimpleNamespace:
         u = wp.clamp(t, f64(0.0), f64(1.0))
         return u * u * (f64(3.0) - f64(2.0) * u)
 
+    @wp.func
+    def border_weight(c: wp.vec3d, s: wp.vec3d, bound: wp.float64, w_lo: wp.float64, w_hi: wp.float64) -> wp.float64:
+        """The least w in [w_lo, w_hi] with |c - w s| <= bound (the smaller root of the quadratic; one exists
+        since the edge is within ``bound`` at w_hi)."""
+        a = wp.dot(s, s)
+        if a <= f64(0.0):
+            return w_lo
+        b = wp.dot(c, s)
+        root = (b - wp.sqrt(wp.max(b * b - a * (wp.dot(c, c) - bound * bound), f64(0.0)))) / a
+        return wp.clamp(root, w_lo, w_hi)
+
     @wp.kernel(enable_backward=False, module="unique")
     def fallback_blend(
         x: wp.array(dtype=wp.vec3d),
@@ -407,6 +434,7 @@ def _kernels() -> SimpleNamespace:
         previous: wp.array(dtype=wp.vec3d),
         out: wp.array(dtype=wp.int32),
         edge_depth_from: wp.float64,
+        border: wp.float64,
     ):
         """(e), one thread: the fallback weight ``w`` of :func:`fallback_weight` (a vertex's depth is the least of
         its own and that of its edges through the obstacle, those counted from ``edge_depth_from``), then
@@ -442,6 +470,29 @@ def _kernels() -> SimpleNamespace:
                 ring[edges[e, 1]] = ring[edges[e, 1]] + w[edges[e, 0]]
             for i in range(n):
                 w[i] = wp.max(w[i], ring[i] * closed_inv_degree[i])
+        for _pass in range(FALLBACK_WIDEN_PASSES):  # Jacobi: raise the lower end of each over-stretched blend
+            for i in range(n):
+                ring[i] = w[i]
+            for e in range(stretch_edges.shape[0]):
+                hi = stretch_edges[e, 0]
+                lo = stretch_edges[e, 1]
+                if w[lo] > w[hi]:
+                    hi = stretch_edges[e, 1]
+                    lo = stretch_edges[e, 0]
+                if w[lo] < w[hi]:
+                    c = x[hi] + w[hi] * (prior[hi] - x[hi]) - x[lo]
+                    s = prior[lo] - x[lo]
+                    bound = wp.max(border * rest[e], wp.length(x[hi] - x[lo]))
+                    bound = wp.max(bound, wp.length(prior[hi] - prior[lo]))
+                    if wp.length(c - w[lo] * s) > bound * f64(1.0 + _STRETCH_TOL):
+                        ring[lo] = wp.max(ring[lo], border_weight(c, s, bound, w[lo], w[hi]))
+            widened = wp.int32(0)
+            for i in range(n):
+                if ring[i] > w[i]:
+                    w[i] = ring[i]
+                    widened = 1
+            if widened == 0:
+                break
         for i in range(n):
             wi = w[i] * mobile[i]
             if wi > f64(0.0):
@@ -698,7 +749,7 @@ class _State:
                 1,
                 [x, d, con.wp_moving, buf["hit"], buf["s_depth"], con.wp_stretch, con.wp_rest, con.wp_edges]
                 + [con.wp_closed_inv_degree, con.wp_mobile, buf["prior"], buf["w"], buf["ring"], buf["previous"]]
-                + [buf["flag"], FALLBACK_DEPTH],
+                + [buf["flag"], FALLBACK_DEPTH, FALLBACK_BORDER],
             ),
             diffuse=record(
                 k.diffuse, 1, [0.0, x, buf["x0"], con.wp_edges, con.wp_mobile, con.wp_inv_degree, buf["ring3"]]
@@ -731,13 +782,17 @@ class _State:
         self.cmd.diffuse.set_param_by_name("alpha", float(alpha))
         self.cmd.diffuse.launch()
 
-    def fall_back(self, prior: np.ndarray, edge_depth_from: float = FALLBACK_DEPTH) -> np.ndarray | None:
+    def fall_back(
+        self, prior: np.ndarray, edge_depth_from: float = FALLBACK_DEPTH, border: float = FALLBACK_BORDER
+    ) -> np.ndarray | None:
         """Blend the mobile vertices that are deep inside the obstacle, on an edge deep through it (deeper than
-        ``edge_depth_from``) or on a torn edge towards ``prior`` (the ``fallback_blend`` kernel; :func:`fallback_weight`
-        is its reference once each vertex's ``d`` is lowered to the depth of the deepest edge through the body at
-        it); returns the blended garment, or None (nothing moved)."""
+        ``edge_depth_from``) or on a torn edge towards ``prior``, the fade widened to keep edges within ``border`` x
+        their rest length (the ``fallback_blend`` kernel; :func:`fallback_weight` is its reference once each vertex's
+        ``d`` is lowered to the depth of the deepest edge through the body at it); returns the blended garment, or
+        None (nothing moved)."""
         self.buf["prior"].numpy()[:] = prior
         self.cmd.fallback.set_param_by_name("edge_depth_from", float(edge_depth_from))
+        self.cmd.fallback.set_param_by_name("border", float(border))
         self.cmd.fallback.launch()
         if not self.buf["flag"].numpy()[1]:
             return None
@@ -772,20 +827,29 @@ def fallback_weight(
     d: np.ndarray,
     edges: np.ndarray,
     closed_inv_degree: np.ndarray,
-    torn_edges: np.ndarray | None = None,
-    torn_ratio: np.ndarray | None = None,
+    stretch_edges: np.ndarray | None = None,
+    rest: np.ndarray | None = None,
+    x: np.ndarray | None = None,
+    prior: np.ndarray | None = None,
+    border: float = FALLBACK_BORDER,
 ) -> np.ndarray:
     """Weight (N,) in [0, 1] of the fallback at each vertex from its signed distance ``d`` (N,) to the obstacle:
-    0 above -``FALLBACK_DEPTH``, 1 below -(``FALLBACK_DEPTH`` + ``FALLBACK_RAMP``), a smoothstep between; at least
-    smoothstep((ratio - ``FALLBACK_STRETCH``) / ``FALLBACK_STRETCH_RAMP``) at both ends of each of ``torn_edges``
-    (E, 2) with its length ratio ``torn_ratio`` (E,); then ``FALLBACK_PASSES`` times w = max(w, mean of w over the
-    vertex and its neighbours along ``edges``), so that a patch moves as a whole and its border fades over a few
-    rings. Continuous in ``d`` and the ratios; 0 where nothing is deep or torn."""
+    0 above -``FALLBACK_DEPTH``, 1 below -(``FALLBACK_DEPTH`` + ``FALLBACK_RAMP``), a smoothstep between; given the
+    garment ``x`` (N, 3), at least smoothstep((ratio - ``FALLBACK_STRETCH``) / ``FALLBACK_STRETCH_RAMP``) at both ends
+    of each of ``stretch_edges`` (E, 2) with its length ratio to ``rest`` (E,); then ``FALLBACK_PASSES`` times
+    w = max(w, mean of w over the vertex and its neighbours along ``edges``), so that a patch moves as a whole and its
+    border fades over a few rings; then, given the ``prior`` (N, 3) it is blended towards, at most
+    ``FALLBACK_WIDEN_PASSES`` Jacobi passes that raise the lower weight of each stretch edge whose blended length
+    x + w (prior - x) would exceed ``border`` x its rest length and both its lengths in ``x`` and ``prior``
+    to the least weight that keeps it there, until nothing changes. Continuous in the inputs; 0 where nothing is
+    deep or torn."""
     w = smoothstep((-np.asarray(d, np.float64) - FALLBACK_DEPTH) / FALLBACK_RAMP)
-    if torn_edges is not None and len(torn_edges):
-        wt = smoothstep((np.asarray(torn_ratio, np.float64) - FALLBACK_STRETCH) / FALLBACK_STRETCH_RAMP)
-        np.maximum.at(w, torn_edges[:, 0], wt)
-        np.maximum.at(w, torn_edges[:, 1], wt)
+    if x is not None and stretch_edges is not None and len(stretch_edges):
+        a, b = stretch_edges[:, 0], stretch_edges[:, 1]
+        ratio = np.linalg.norm(x[b] - x[a], axis=1) / rest
+        wt = smoothstep((ratio - FALLBACK_STRETCH) / FALLBACK_STRETCH_RAMP)
+        np.maximum.at(w, a, wt)
+        np.maximum.at(w, b, wt)
     if not w.any() or len(edges) == 0:
         return w
     n = len(w)
@@ -793,6 +857,28 @@ def fallback_weight(
         ring = np.bincount(edges[:, 0], weights=w[edges[:, 1]], minlength=n)
         ring += np.bincount(edges[:, 1], weights=w[edges[:, 0]], minlength=n)
         w = np.maximum(w, (w + ring) * closed_inv_degree)
+    if prior is None or x is None or stretch_edges is None or not len(stretch_edges):
+        return w
+    shift = prior - x
+    bound = np.maximum(border * rest, np.linalg.norm(x[b] - x[a], axis=1))
+    bound = np.maximum(bound, np.linalg.norm(prior[b] - prior[a], axis=1))
+    for _ in range(FALLBACK_WIDEN_PASSES):
+        swap = w[b] > w[a]
+        hi, lo = np.where(swap, b, a), np.where(swap, a, b)
+        c = x[hi] + w[hi, None] * shift[hi] - x[lo]
+        s = shift[lo]
+        over = (w[lo] < w[hi]) & (np.linalg.norm(c - w[lo, None] * s, axis=1) > bound * (1.0 + _STRETCH_TOL))
+        if not over.any():
+            break
+        c, s, bd, lo, w_lo, w_hi = c[over], s[over], bound[over], lo[over], w[lo[over]], w[hi[over]]
+        qa, qb = np.einsum("ij,ij->i", s, s), np.einsum("ij,ij->i", c, s)
+        disc = np.maximum(qb * qb - qa * (np.einsum("ij,ij->i", c, c) - bd * bd), 0.0)
+        root = np.where(qa > 0, (qb - np.sqrt(disc)) / np.where(qa > 0, qa, 1.0), w_lo)
+        wider = w.copy()
+        np.maximum.at(wider, lo, np.clip(root, w_lo, w_hi))
+        if not (wider > w).any():
+            break
+        w = wider
     return w
 
 
@@ -878,12 +964,14 @@ def refine(
         return np.array(x_in, dtype=out_dtype)
 
     if fb is not None:
-        blended = state.fall_back(fb)
+        blended = state.fall_back(fb, FALLBACK_DEPTH, FALLBACK_BORDER)
         if blended is not None:
             x0 = blended
     _rounds(state, iterations, x0, smoothing_weight(fab, state.con.mean_edge))
-    if fb is not None and state.through() and state.fall_back(fb, edge_depth_from=EDGE_DEPTH_FROM) is not None:
-        _rounds(state, iterations)  # edges still through the body after the rounds: the fallback takes them over
+    for _ in range(MAX_HANDOVERS if fb is not None else 0):  # edges still through the body after the rounds:
+        if not state.through() or state.fall_back(fb, EDGE_DEPTH_FROM, HANDOVER_BORDER) is None:
+            break
+        _rounds(state, iterations)  # the fallback takes their patches over and the rounds run again
     # final exact contact projection (contact wins over stretch), re-checked where the body is concave
     for _ in range(4):
         if not state.project_contacts():

@@ -107,8 +107,9 @@ def test_limb_through_the_cloth_between_shallow_vertices_uses_the_fallback():
     np.testing.assert_allclose(out[across], lifted[across], atol=1e-9)  # weight 1: on the fallback
 
 
-def test_the_fallback_kernel_is_fallback_weight():
-    """The blend refine runs (a warp kernel) is the documented numpy reference: depth, edges through, torn edges."""
+def _blend_case():
+    """A sleeve around a limb with a column through the limb, a torn patch and three pins; the fallback is 6 cm
+    off the sleeve, so the few rings of the plain fade would stretch its border ~3x."""
     tpl, f = sleeve(radius=0.03, nu=16, nv=9, length=0.16)
     limb = _capsule(0.02, 0.5)
     bv, bf = np.asarray(limb.vertices), np.asarray(limb.faces, dtype=np.int64)
@@ -117,19 +118,45 @@ def test_the_fallback_kernel_is_fallback_weight():
     x[40:44, 2] += 0.06  # and a torn patch (edges ~3x)
     pinned = np.zeros(len(x), dtype=bool)
     pinned[-3:] = True
-    prior = tpl + 0.001
+    prior = tpl + np.array([0.0, 0.06, 0.0])
     con = _constraints(tpl, f, pinned, 1.1)
-    state = _State(x, obstacle(bv, bf), con, 0.002)
+    return x, prior, con, obstacle(bv, bf)
+
+
+@pytest.mark.parametrize("border", [1.5, 1.1])
+def test_the_fallback_kernel_is_fallback_weight(border):
+    """The blend refine runs (a warp kernel) is the documented numpy reference: depth, edges through, torn edges
+    and the widened fade."""
+    x, prior, con, obs = _blend_case()
+    state = _State(x, obs, con, 0.002)
     hit = np.flatnonzero(state.buf["hit"].numpy())
     depth = state.buf["d"].numpy().copy()
     np.minimum.at(depth, con.moving_edges[hit, 0], state.buf["s_depth"].numpy()[hit])
     np.minimum.at(depth, con.moving_edges[hit, 1], state.buf["s_depth"].numpy()[hit])
-    se = con.stretch_edges
-    ratio = np.linalg.norm(x[se[:, 1]] - x[se[:, 0]], axis=1) / con.rest
-    w = fallback_weight(depth, con.edges, con.closed_inv_degree, se, ratio) * con.mobile
+    args = (depth, con.edges, con.closed_inv_degree, con.stretch_edges, con.rest, x)
+    w = fallback_weight(*args, prior, border) * con.mobile
+    plain = fallback_weight(*args) * con.mobile  # the few rings alone
     assert (w == 1).sum() > 5 and (w == 0).sum() > 20 and ((w > 0) & (w < 1)).sum() > 5
-    blended = state.fall_back(prior)
+    assert (w > plain + 0.05).sum() > 10  # widened
+    blended = state.fall_back(prior, border=border)
     np.testing.assert_allclose(blended, x + w[:, None] * (prior - x), rtol=0, atol=1e-12)
+
+
+def test_the_blend_keeps_its_border_within_the_bound():
+    """Blended towards a fallback 6 cm away, no edge is longer than the bound x its rest length or its length in the
+    prediction or the fallback, whichever is longest (the plain few-ring fade: 2.5x that)."""
+    x, prior, con, obs = _blend_case()
+    se, rest = con.stretch_edges, con.rest
+
+    def excess(y, border):
+        own = np.linalg.norm(x[se[:, 1]] - x[se[:, 0]], axis=1)
+        own = np.maximum(own, np.linalg.norm(prior[se[:, 1]] - prior[se[:, 0]], axis=1))
+        return (np.linalg.norm(y[se[:, 1]] - y[se[:, 0]], axis=1) / np.maximum(border * rest, own)).max()
+
+    for border in (1.5, 1.1):
+        assert excess(_State(x, obs, con, 0.002).fall_back(prior, border=border), border) <= 1.0 + 1e-3
+    plain = _State(x, obs, con, 0.002).fall_back(prior, border=1e6)  # no widening
+    assert excess(plain, 1.5) > 2.0  # 2.46 here
 
 
 def _cap_on_sphere():
