@@ -29,47 +29,47 @@ from pathlib import Path
 import numpy as np
 import torch
 
+import garsim.refine
 from garsim.api import GarSim, SequenceConfig, smooth_corrections
 from garsim.bodies.anny import AnnyBody
 from garsim.bodies.poses import batched_matrices, motion, stack_poses
 from garsim.demo import DEMO_GARMENTS, _build_garment
 from garsim.eval.metrics import MIN_REST, constraint_figures, jitter_mm
 from garsim.geometry.inside import obstacle
-from garsim.refine import RefineMemo, refine
 
 
 def load_refine(path: Path):
-    """The ``refine`` function of another copy of garsim/refine.py."""
+    """Another copy of garsim/refine.py, as a module (its ``refine`` takes its own ``RefineMemo``)."""
     spec = importlib.util.spec_from_file_location("other_refine", path)
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
-    return module.refine
+    return module
 
 
 def refine_ms(
     raw: np.ndarray, garment, targets: np.ndarray, faces: np.ndarray, fabric: str, prior: np.ndarray, impls: dict
 ) -> dict[str, tuple[float, float]]:
     """Median CPU ms of refine per frame, as ``drape_sequence`` calls it, of each implementation in ``impls`` (name
-    -> refine function), interleaved frame by frame: the first pass (the raw frame on its own pose with the prior as
-    its fallback), then the second (the first pass's frames with their correction smoothed over time, each frame
-    with its first pass's ``RefineMemo`` where the implementation takes one). Before each timed call the obstacle is
-    moved to another pose, so that every call refits it as in a sequence."""
+    -> a module with ``refine`` and ``RefineMemo``), interleaved frame by frame: the first pass (the raw frame on its
+    own pose with the prior as its fallback), then the second (the first pass's frames with their correction
+    smoothed over time, each frame with its first pass's ``RefineMemo`` where the implementation takes one). Before
+    each timed call the obstacle is moved to another pose, so that every call refits it as in a sequence."""
     kw = {"pinned": garment.pinned}
     tpl, gf = garment.vertices, garment.faces
-    memos = {name: [RefineMemo() for _ in raw] for name in impls}
+    memos = {name: [impls[name].RefineMemo() for _ in raw] for name in impls}
     first = {name: [] for name in impls}
     times = {name: ([], []) for name in impls}
 
     def timed(name: str, x: np.ndarray, t: int, which: int) -> np.ndarray:
-        extra = {"memo": memos[name][t]} if "memo" in inspect.signature(impls[name]).parameters else {}
+        extra = {"memo": memos[name][t]} if "memo" in inspect.signature(impls[name].refine).parameters else {}
         obstacle(targets[t - 1], faces)  # another pose: this call refits the obstacle, as in a sequence
         t0 = time.process_time()
-        out = impls[name](x, tpl, gf, targets[t], faces, fabric, fallback=prior[t], **kw, **extra)
+        out = impls[name].refine(x, tpl, gf, targets[t], faces, fabric, fallback=prior[t], **kw, **extra)
         times[name][which].append(1e3 * (time.process_time() - t0))
         return out
 
     for name in impls:  # warm-up (kernels, per-garment caches)
-        impls[name](raw[0], tpl, gf, targets[0], faces, fabric, fallback=prior[0], **kw)
+        impls[name].refine(raw[0], tpl, gf, targets[0], faces, fabric, fallback=prior[0], **kw)
     for t, x in enumerate(raw):
         for name in impls:
             first[name].append(timed(name, x, t, 0))
@@ -112,7 +112,7 @@ def main(vertices: list[int], frames: int, out: Path, model: str | None = None, 
             raw, raw_fps = timed_sequence(raw_sim, canonical, targets, mesh, **kw)
             refined, fps = timed_sequence(sim, canonical, targets, mesh, **kw)
             skinned = prior.drape_sequence(canonical, targets, mesh, **kw)
-            ms = refine_ms(raw, g, targets, body.faces, fabric, skinned, {"refine": refine, **against})
+            ms = refine_ms(raw, g, targets, body.faces, fabric, skinned, {"refine": garsim.refine, **against})
             first_ms, second_ms = ms["refine"]
             entry = {
                 "vertices": int(len(g.vertices)),

@@ -44,7 +44,8 @@ prediction tangled with the body is improved, not solved), or up to ``MAX_TORN_R
 edge with a free end is still over ``TORN_STRETCH`` x its rest length (a torn prediction gets the sweeps it needs to
 close); an edge still through the obstacle after them hands its patch to the ``fallback`` at any depth (the edge
 samples could not push it off: a hand or forearm between two vertices of a coarse hem) and the rounds run again, up
-to ``MAX_HANDOVERS`` times; and a final exact contact projection guarantees the margin (contact wins over stretch where they conflict).
+to ``MAX_HANDOVERS`` times; and a final exact contact projection guarantees the margin (contact wins over stretch
+where they conflict).
 
 Closest point on the obstacle (``garsim.geometry.inside.Obstacle``, the one exact query garsim has): a
 warp BVH over the obstacle's triangles (float32) finds each point's
