@@ -2,6 +2,7 @@
 trained under one protocol (data, split, schedule, seed) and scored per garment family on the test split.
 
     .venv/bin/python examples/experiments.py heads --data ~/garsim-data/v3 --out runs/studies --budget 30
+    .venv/bin/python examples/experiments.py baselines --data ~/garsim-data/v3 --out runs/studies --budget 30
     .venv/bin/python examples/experiments.py generalisation --data ~/garsim-data/v3 --out runs/studies --budget 30
     .venv/bin/python examples/experiments.py resolution --data ~/garsim-data/v3 --out runs/studies --budget 30
     .venv/bin/python examples/experiments.py scaling --data ~/garsim-data/v3 --out runs/studies --budget 30
@@ -9,7 +10,7 @@ trained under one protocol (data, split, schedule, seed) and scored per garment 
 
 Each writes <out>/<study>.json and <out>/<study>.md (its tables, headed by the command). Trained models go to
 <out>/models/<key>/, keyed by what decides them, so a variant several studies share (the base model trained on
-every family: heads, generalisation, scaling at 100%, resolution, corrections) is trained once, and a rerun
+every family: heads, baselines, generalisation, scaling at 100%, resolution, corrections) is trained once, and a rerun
 resumes. ``scaling`` also runs the external set's check.py on every model when the file exists.
 """
 
@@ -33,6 +34,7 @@ from garsim.train.trainer import TrainConfig
 EXTERNAL = Path(__file__).resolve().parents[2] / "shared" / "external-eval" / "check.py"
 TITLES = {
     "heads": "Table 2 analog: decoder heads and message-passing steps",
+    "baselines": "Table 3 analog: GarSim beside the DeePSD-style baseline",
     "generalisation": "Generalisation: trained on some families, tested on all",
     "resolution": "Resolution: trained at low resolution, tested at 1x-8x",
     "scaling": "Data scaling: error vs training-set size",
@@ -61,6 +63,8 @@ def parser() -> argparse.ArgumentParser:
     s = sub.add_parser("heads", parents=[common], help=TITLES["heads"])
     s.add_argument("--heads", nargs="+", choices=HEADS, default=list(HEADS))
     s.add_argument("--steps", nargs="+", type=int, default=list(studies.STEPS), help="message-passing steps L")
+    s = sub.add_parser("baselines", parents=[common], help=TITLES["baselines"])
+    s.add_argument("--resolutions", nargs="+", choices=("low", "full"), default=["low", "full"])
     s = sub.add_parser("generalisation", parents=[common], help=TITLES["generalisation"])
     s.add_argument("--families", nargs="+", choices=GARMENT_TYPES, default=list(studies.SEEN_FAMILIES))
     s = sub.add_parser("resolution", parents=[common], help=TITLES["resolution"])
@@ -98,6 +102,8 @@ def run(args: argparse.Namespace) -> tuple[dict[str, Any], list[str]]:
     study = study_config(args)
     if args.study == "heads":
         result = studies.heads_and_steps(study, args.heads, args.steps)
+    elif args.study == "baselines":
+        result = studies.baselines(study, args.resolutions)
     elif args.study == "generalisation":
         result = studies.generalisation(study, args.families)
     elif args.study == "scaling":
@@ -132,6 +138,14 @@ def run(args: argparse.Namespace) -> tuple[dict[str, Any], list[str]]:
                 f"{f}x: {lv['vertices']:.0f} vertices on average, measured linear factor {lv['linear_factor']:.2f}"
                 for f, lv in result["levels"].items()
             ),
+        )
+    if "garsim_over_deepsd" in result:
+        sections.append(
+            "GarSim's error over the DeePSD-style baseline's (the paper: at most 0.5):\n\n"
+            + "\n".join(
+                f"- {res}: " + ", ".join(f"{k} {v:.2f}" for k, v in per.items())
+                for res, per in result["garsim_over_deepsd"].items()
+            )
         )
     if result.get("external"):
         sections.append("External set (`check.py`, API defaults):\n\n" + studies.external_table(result["external"]))

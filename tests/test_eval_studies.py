@@ -141,3 +141,21 @@ def test_driver_corrections(driver, driver_args):
         assert r["simulation_mean_mm"] == pytest.approx(1000 * np.linalg.norm(s.target - s.prior, axis=1).mean())
     assert len(list((folder / "models").iterdir())) == 1  # the base model, trained by `resolution`, reused
     assert "corrections/" in (folder / "corrections.md").read_text()
+
+
+def test_baselines_table3_trains_the_deepsd_style_baseline_under_the_same_protocol(tmp_path):
+    from garsim.eval.studies import baselines
+
+    out = baselines(_study(tmp_path), resolutions=("low",))  # the fixture's test split holds only the low meshes
+    garsim_dir, deepsd_dir = (Path(out["models"][k]["dir"]) for k in ("GarSim", "DeePSD-style"))
+    assert garsim_dir != deepsd_dir
+    assert json.loads((deepsd_dir.parent / "variant.json").read_text())["train"]["model"] == "deepsd"
+    assert out["models"]["GarSim"]["train_sequences"] == out["models"]["DeePSD-style"]["train_sequences"] == 2
+    assert set(out["results"]) == {f"{m} @ low" for m in ("GarSim", "DeePSD-style", *BASELINES)}
+    for res in ("low",):
+        g, d = out["results"][f"GarSim @ {res}"], out["results"][f"DeePSD-style @ {res}"]
+        assert set(out["garsim_over_deepsd"][res]) == set(g) == TEST_FAMILIES
+        np.testing.assert_allclose(
+            out["garsim_over_deepsd"][res]["all"], g["all"]["euclidean_mm"] / d["all"]["euclidean_mm"]
+        )
+    json.dumps(out)

@@ -1,7 +1,8 @@
 """The paper's studies on our data, each trained and scored under one shared protocol (data, split, schedule,
-seed): Table 2 (decoder heads and message-passing steps), generalisation to garment families never trained on,
-resolution (1x-8x the training resolution, with and without the API's decimation path), data scaling, and the
-corrections over the prior (Fig. 8). ``examples/experiments.py`` runs each as one command.
+seed): Table 2 (decoder heads and message-passing steps), Table 3 (GarSim beside the DeePSD-style baseline),
+generalisation to garment families never trained on, resolution (1x-8x the training resolution, with and without the
+API's decimation path), data scaling, and the corrections over the prior (Fig. 8). ``examples/experiments.py`` runs
+each as one command.
 """
 
 from __future__ import annotations
@@ -70,21 +71,24 @@ def train_variant(
     model: GarSimConfig | None = None,
     families: Sequence[str] | None = None,
     fraction: float = 1.0,
+    kind: str | None = None,
 ) -> tuple[GraphModel, dict[str, Any]]:
     """Train one variant (``model``: the study's base model; ``families`` / ``fraction``: as
-    ``train_val_samples``) under the study's protocol; returns its best checkpoint and a record of the run.
+    ``train_val_samples``; ``kind``: a key of ``garsim.model.baselines.MODELS``, default the study's
+    ``TrainConfig.model``) under the study's protocol; returns its best checkpoint and a record of the run.
 
     The run folder is keyed by everything that decides the result (model config, schedule, seed and the
     sequences trained and validated on), so a variant several studies share is trained once, and a rerun
     resumes an interrupted run rather than starting again."""
     config = model or study.model
+    schedule = study.train if kind is None else dataclasses.replace(study.train, model=kind)
     train, val = train_val_samples(
         study.data, study.resolution, study.val_every, families=families, fraction=fraction, seed=study.train.seed
     )
     sequences = {name: sorted({s.meta["seq_id"] for s in part}) for name, part in (("train", train), ("val", val))}
     variant = {
         "model": config.to_dict(),
-        "train": {k: v for k, v in study.train.to_dict().items() if k not in RUN_ONLY_KEYS},
+        "train": {k: v for k, v in schedule.to_dict().items() if k not in RUN_ONLY_KEYS},
         "resolution": study.resolution,
         "families": sorted(families) if families is not None else None,
         "fraction": fraction,
@@ -94,7 +98,7 @@ def train_variant(
     out = Path(study.train.out_dir) / "models" / key
     out.mkdir(parents=True, exist_ok=True)
     atomic_write(out / "variant.json", lambda p: Path(p).write_text(json.dumps(variant, indent=1)))
-    Trainer(config, dataclasses.replace(study.train, out_dir=str(out)), train, val or None).fit()
+    Trainer(config, dataclasses.replace(schedule, out_dir=str(out)), train, val or None).fit()
     record = {
         "dir": str(out / "best"),
         "train_samples": len(train),
@@ -126,6 +130,33 @@ def heads_and_steps(study: StudyConfig, heads: Sequence[str] = HEADS, steps: Seq
     configs = {f"{h}, L={base.num_steps}": dataclasses.replace(base, head=h) for h in heads}
     configs.update({f"{base.head}, L={n}": dataclasses.replace(base, num_steps=n) for n in steps})
     return _study(study, {label: {"model": cfg} for label, cfg in configs.items()})
+
+
+def baselines(study: StudyConfig, resolutions: Sequence[str] = ("low", "full")) -> dict[str, Any]:
+    """Table 3 analog: GarSim beside the DeePSD-style baseline (``--model deepsd``, trained under the same protocol:
+    data, split, schedule, seed) and the prior and nearest-vertex rows, every metric per family, at each of the
+    ``resolutions`` of the scored split (both models trained at the study's resolution; raw networks)."""
+    trained = {
+        label: train_variant(study, kind=kind) for label, kind in (("GarSim", "garsim"), ("DeePSD-style", "deepsd"))
+    }
+    results: Results = {}
+    for res in resolutions:
+        for label, (model, _) in trained.items():
+            scored = evaluate_split(
+                model, study.data, study.split, res, collision_margin=None, name=label, baselines=False
+            )
+            results[f"{label} @ {res}"] = scored[label]
+        for method, per in evaluate_split(None, study.data, study.split, res).items():
+            results[f"{method} @ {res}"] = per
+    ratio = {
+        res: {
+            k: v["euclidean_mm"] / results[f"DeePSD-style @ {res}"][k]["euclidean_mm"]
+            for k, v in results[f"GarSim @ {res}"].items()
+        }
+        for res in resolutions
+    }
+    models = {label: info for label, (_, info) in trained.items()}
+    return {"protocol": study.to_dict(), "models": models, "results": results, "garsim_over_deepsd": ratio}
 
 
 def generalisation(study: StudyConfig, seen: Sequence[str] = SEEN_FAMILIES) -> dict[str, Any]:
