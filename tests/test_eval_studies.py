@@ -159,3 +159,13 @@ def test_baselines_table3_trains_the_deepsd_style_baseline_under_the_same_protoc
             out["garsim_over_deepsd"][res]["all"], g["all"]["euclidean_mm"] / d["all"]["euclidean_mm"]
         )
     json.dumps(out)
+
+
+def test_driver_baselines(driver, driver_args):
+    folder, args = driver_args
+    assert driver.main(["baselines", *args, "--resolutions", "low"]) == 0
+    out = json.loads((folder / "baselines.json").read_text())
+    assert set(out["garsim_over_deepsd"]) == {"low"} and "GarSim @ low" in out["results"]
+    text = (folder / "baselines.md").read_text()
+    assert "`python examples/experiments.py baselines --data" in text and "| DeePSD-style @ low |" in text
+    assert "GarSim's error over the DeePSD-style baseline's (the paper: at most 0.5)" in text
