@@ -103,7 +103,7 @@ def run(args: argparse.Namespace) -> tuple[dict[str, Any], list[str]]:
     if args.study == "heads":
         result = studies.heads_and_steps(study, args.heads, args.steps)
     elif args.study == "baselines":
-        result = studies.baselines(study, args.resolutions)
+        result = studies.deepsd_comparison(study, args.resolutions)
     elif args.study == "generalisation":
         result = studies.generalisation(study, args.families)
     elif args.study == "scaling":

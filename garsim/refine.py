@@ -845,7 +845,8 @@ def fallback_weight(
     to the least weight that keeps it there, until nothing changes. Continuous in the inputs; 0 where nothing is
     deep or torn."""
     w = smoothstep((-np.asarray(d, np.float64) - FALLBACK_DEPTH) / FALLBACK_RAMP)
-    if x is not None and stretch_edges is not None and len(stretch_edges):
+    edged = x is not None and stretch_edges is not None and len(stretch_edges) > 0
+    if edged:
         a, b = stretch_edges[:, 0], stretch_edges[:, 1]
         ratio = np.linalg.norm(x[b] - x[a], axis=1) / rest
         wt = smoothstep((ratio - FALLBACK_STRETCH) / FALLBACK_STRETCH_RAMP)
@@ -858,7 +859,7 @@ def fallback_weight(
         ring = np.bincount(edges[:, 0], weights=w[edges[:, 1]], minlength=n)
         ring += np.bincount(edges[:, 1], weights=w[edges[:, 0]], minlength=n)
         w = np.maximum(w, (w + ring) * closed_inv_degree)
-    if prior is None or x is None or stretch_edges is None or not len(stretch_edges):
+    if prior is None or not edged:
         return w
     shift = prior - x
     bound = np.maximum(border * rest, np.linalg.norm(x[b] - x[a], axis=1))

@@ -12,6 +12,7 @@ from garsim.data.store import DatasetStore
 from garsim.eval.studies import (
     StudyConfig,
     data_scaling,
+    deepsd_comparison,
     family_table,
     generalisation,
     heads_and_steps,
@@ -144,9 +145,9 @@ def test_driver_corrections(driver, driver_args):
 
 
 def test_baselines_table3_trains_the_deepsd_style_baseline_under_the_same_protocol(tmp_path):
-    from garsim.eval.studies import baselines
-
-    out = baselines(_study(tmp_path), resolutions=("low",))  # the fixture's test split holds only the low meshes
+    out = deepsd_comparison(
+        _study(tmp_path), resolutions=("low",)
+    )  # the fixture's test split holds only the low meshes
     garsim_dir, deepsd_dir = (Path(out["models"][k]["dir"]) for k in ("GarSim", "DeePSD-style"))
     assert garsim_dir != deepsd_dir
     assert json.loads((deepsd_dir.parent / "variant.json").read_text())["train"]["model"] == "deepsd"
@@ -169,3 +170,22 @@ def test_driver_baselines(driver, driver_args):
     text = (folder / "baselines.md").read_text()
     assert "`python examples/experiments.py baselines --data" in text and "| DeePSD-style @ low |" in text
     assert "GarSim's error over the DeePSD-style baseline's (the paper: at most 0.5)" in text
+
+
+def test_solver_convergence_budgets_keep_the_damping_per_second():
+    """examples/solver_convergence.py varies only the solver's convergence: every budget damps velocity by the same
+    factor per simulated second as SimConfig(), and the floor run scales gravity alone."""
+    from garsim.physics.newton_sim import SimConfig
+
+    spec = importlib.util.spec_from_file_location(
+        "solver_convergence", Path(__file__).parents[1] / "examples" / "solver_convergence.py"
+    )
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    base = SimConfig()
+    per_second = base.damping ** (base.substeps * base.fps)
+    for budget, (substeps, iterations) in {"10x4": (10, 4), "20x8": (20, 8), "80x8": (80, 8)}.items():
+        cfg = module.budget_config(budget)
+        assert (cfg.substeps, cfg.iterations, cfg.gravity) == (substeps, iterations, base.gravity)
+        assert cfg.damping ** (cfg.substeps * cfg.fps) == pytest.approx(per_second, rel=1e-9)
+    assert module.budget_config("40x8", 1.001).gravity == pytest.approx(1.001 * base.gravity)

@@ -132,7 +132,7 @@ def heads_and_steps(study: StudyConfig, heads: Sequence[str] = HEADS, steps: Seq
     return _study(study, {label: {"model": cfg} for label, cfg in configs.items()})
 
 
-def baselines(study: StudyConfig, resolutions: Sequence[str] = ("low", "full")) -> dict[str, Any]:
+def deepsd_comparison(study: StudyConfig, resolutions: Sequence[str] = ("low", "full")) -> dict[str, Any]:
     """Table 3 analog: GarSim beside the DeePSD-style baseline (``--model deepsd``, trained under the same protocol:
     data, split, schedule, seed) and the prior and nearest-vertex rows, every metric per family, at each of the
     ``resolutions`` of the scored split (both models trained at the study's resolution; raw networks)."""
