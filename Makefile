@@ -38,7 +38,8 @@ results: $(STAMP)
 	$(VENV)/bin/garsim eval --data $(DATA) --model $(MODEL) --refine --out docs/results.json
 	if [ -f $(EXTERNAL) ]; then \
 	  $(VENV)/bin/python $(EXTERNAL) --model $(MODEL) --json docs/external_default.json && \
-	  $(VENV)/bin/python examples/external_check.py --model $(MODEL) --raw --json docs/external_raw.json; fi
+	  $(VENV)/bin/python examples/external_check.py --model $(MODEL) --raw --json docs/external_raw.json && \
+	  $(VENV)/bin/python examples/external_check.py --prior-only --refine --json docs/external_prior_refine.json; fi
 	$(VENV)/bin/garsim bench --model $(MODEL) --sizes 600 2400 10000 40000 --out docs/bench.json
 	$(VENV)/bin/python examples/make_report.py --run $(patsubst %/log.csv,%,$(wildcard $(RUN)/log.csv)) --model $(MODEL) --data $(DATA) \
-	  --results docs/results.json --external $(wildcard docs/external_default.json docs/external_raw.json)
+	  --results docs/results.json --external $(wildcard docs/external_default.json docs/external_raw.json docs/external_prior_refine.json)
