@@ -318,6 +318,24 @@ def _kernels() -> SimpleNamespace:
                 return
 
     @wp.kernel(enable_backward=False, module="unique")
+    def torn_edges(
+        x: wp.array(dtype=wp.vec3d),
+        stretch_edges: wp.array2d(dtype=wp.int32),
+        rest: wp.array(dtype=wp.float64),
+        limit: wp.array(dtype=wp.float64),
+        ratio: wp.float64,
+        scale: wp.float64,
+        out: wp.array(dtype=wp.int32),
+    ):
+        """out[0] = 1 if an edge is longer than ``scale`` x the larger of ``ratio`` x its rest length and its limit."""
+        out[0] = 0
+        for e in range(stretch_edges.shape[0]):
+            bound = scale * wp.max(ratio * rest[e], limit[e])
+            if wp.length(x[stretch_edges[e, 1]] - x[stretch_edges[e, 0]]) > bound:
+                out[0] = 1
+                return
+
+    @wp.kernel(enable_backward=False, module="unique")
     def sweeps(
         iterations: int,
         relax: wp.float64,
@@ -542,6 +560,7 @@ def _kernels() -> SimpleNamespace:
         vertex_state=vertex_state,
         sample_state=sample_state,
         violations=violations,
+        torn_edges=torn_edges,
         sweeps=sweeps,
         fallback_blend=fallback_blend,
         diffuse=diffuse,
@@ -615,6 +634,7 @@ def _buffers(n: int, samples: tuple[int, int]) -> dict[str, Any]:
         "s_count": (1, wp.int32),
         "chebyshev": (2, wp.float64),
         "flag": (2, wp.int32),
+        "torn": (1, wp.int32),
         "x0": (n, wp.vec3d),
         "prior": (n, wp.vec3d),
         "w": (n, wp.float64),
@@ -759,6 +779,9 @@ class _State:
             violations=record(
                 k.violations, 1, [x, con.wp_stretch, con.wp_limit, con.wp_mobile, d, buf["hit"], margin, buf["flag"]]
             ),
+            torn=record(
+                k.torn_edges, 1, [x, con.wp_stretch, con.wp_rest, con.wp_limit, TORN_STRETCH, 1.0, buf["torn"]]
+            ),
             sweeps=record(k.sweeps, 1, sweeps),
             fallback=record(
                 k.fallback_blend,
@@ -819,21 +842,23 @@ class _State:
         """Whether an edge meets the obstacle's surface (at the last queries)."""
         return bool(self.buf["hit"].numpy().any())
 
-    def torn(self) -> bool:
-        """Whether an edge with a free end is longer than ``TORN_STRETCH`` x its rest length (and its own limit)."""
-        x, e = self.x, self.con.stretch_edges
-        bound = np.maximum(TORN_STRETCH * self.con.rest, self.con.limit)
-        return bool((np.linalg.norm(x[e[:, 1]] - x[e[:, 0]], axis=1) > bound).any())
+    def torn(self, scale: float = 1.0) -> bool:
+        """Whether an edge with a free end is longer than ``scale`` x ``TORN_STRETCH`` x its rest length (and x its own
+        limit)."""
+        self.cmd.torn.set_param_by_name("ratio", float(TORN_STRETCH))
+        self.cmd.torn.set_param_by_name("scale", float(scale))
+        self.cmd.torn.launch()
+        return bool(self.buf["torn"].numpy()[0])
 
     def clamp_torn(self) -> None:
         """Shorten every edge with a free end still over ``TORN_STRETCH`` x its rest length (and its own limit) to
         just within it: averaged Jacobi projections of those edges, after ``CLAMP_PLAIN`` passes with the Chebyshev
         step of the sweeps (``CLAMP_RHO``), until every edge is within, at most ``CLAMP_PASSES``; keeps the best
         iterate (stretch wins over contact past the simulator's rejection bound, by the millimetres it needs)."""
+        if not self.torn(1.0 - 0.5 * _STRETCH_TOL):
+            return
         x, con = self.x, self.con
         e, mob, n = con.stretch_edges, con.mobile, len(self.x)
-        if len(e) == 0:
-            return
         bound = np.maximum(TORN_STRETCH * con.rest, con.limit)
         target = (1.0 - _STRETCH_TOL) * bound  # a little inside, so that the passes end with every edge within
         within = (1.0 - 0.5 * _STRETCH_TOL) * bound
