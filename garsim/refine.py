@@ -44,11 +44,13 @@ prediction tangled with the body is improved, not solved), or up to ``MAX_TORN_R
 edge with a free end is still over ``TORN_STRETCH`` x its rest length (a torn prediction gets the sweeps it needs to
 close); an edge still through the obstacle after them hands its patch to the ``fallback`` at any depth (the edge
 samples could not push it off: a hand or forearm between two vertices of a coarse hem) and the rounds run again, up
-to ``MAX_HANDOVERS`` times; a final exact contact projection guarantees the margin (contact wins over stretch
-where they conflict), except past the simulator's rejection bound: a last clamp shortens the edges still over
-``TORN_STRETCH`` x their rest length to it (a few Jacobi passes, by the millimetres they need), so no edge with a
-free end leaves over that bound (within ``CLAMP_PASSES``), even where that leaves a vertex nearer than the margin or
-inside.
+to ``MAX_HANDOVERS`` times, each time only until no vertex is nearer than the margin, no edge meets the surface and
+none is torn (the stretch the first rounds left below ``TORN_STRETCH`` is not retried: on the walk cycle's
+long-sleeve that cut the refinement's sweeps by a third); a final exact contact projection guarantees the margin
+(contact wins over stretch where they conflict), except past the simulator's rejection bound: a last clamp shortens
+the edges still over ``TORN_STRETCH`` x their rest length to it (a few Jacobi passes, by the millimetres they need),
+so no edge with a free end leaves over that bound (within ``CLAMP_PASSES``), even where that leaves a vertex nearer
+than the margin or inside.
 
 Closest point on the obstacle (``garsim.geometry.inside.Obstacle``, the one exact query garsim has): a
 warp BVH over the obstacle's triangles (float32) finds each point's
@@ -299,12 +301,13 @@ def _kernels() -> SimpleNamespace:
         d: wp.array(dtype=wp.float64),
         hit: wp.array(dtype=wp.int32),
         margin: wp.float64,
+        stretch: int,
         out: wp.array(dtype=wp.int32),
     ):
-        """out[0] = 1 if an edge is over its limit, a mobile vertex nearer than the margin or an edge meets the
-        surface."""
+        """out[0] = 1 if an edge is over its limit (``stretch`` != 0 only), a mobile vertex nearer than the margin or
+        an edge meets the surface."""
         out[0] = 0
-        for e in range(stretch_edges.shape[0]):
+        for e in range(stretch_edges.shape[0] * wp.min(stretch, 1)):
             if wp.length(x[stretch_edges[e, 1]] - x[stretch_edges[e, 0]]) > limit[e] * f64(1.0 + _STRETCH_TOL):
                 out[0] = 1
                 return
@@ -777,7 +780,9 @@ class _State:
             vertex=record(k.vertex_state, n, [*obs.inputs, *vertex]),
             samples=record(k.sample_state, ne, [*obs.inputs, *samples]) if ne else None,
             violations=record(
-                k.violations, 1, [x, con.wp_stretch, con.wp_limit, con.wp_mobile, d, buf["hit"], margin, buf["flag"]]
+                k.violations,
+                1,
+                [x, con.wp_stretch, con.wp_limit, con.wp_mobile, d, buf["hit"], margin, 1, buf["flag"]],
             ),
             torn=record(
                 k.torn_edges, 1, [x, con.wp_stretch, con.wp_rest, con.wp_limit, TORN_STRETCH, 1.0, buf["torn"]]
@@ -806,8 +811,10 @@ class _State:
         if self.cmd.samples is not None:
             self.cmd.samples.launch()
 
-    def violated(self) -> bool:
-        """Whether an edge is over its limit, a mobile vertex nearer than the margin or an edge meets the surface."""
+    def violated(self, stretch: bool = True) -> bool:
+        """Whether an edge is over its limit (``stretch`` only), a mobile vertex nearer than the margin or an edge
+        meets the surface."""
+        self.cmd.violations.set_param_by_name("stretch", int(stretch))
         self.cmd.violations.launch()
         return bool(self.buf["flag"].numpy()[0])
 
@@ -960,16 +967,22 @@ def fallback_weight(
     return w
 
 
-def _rounds(state: _State, iterations: int, x0: np.ndarray | None = None, alpha: float = 0.0) -> None:
+def _rounds(
+    state: _State, iterations: int, x0: np.ndarray | None = None, alpha: float = 0.0, contacts_only: bool = False
+) -> None:
     """Rounds of ``iterations`` sweeps, each ending with fresh queries, until nothing is violated: at most
     ``MAX_ROUNDS``, or ``MAX_TORN_ROUNDS`` (with ``TORN_SWEEPS`` x the sweeps) while an edge is torn; the first round
-    diffuses the correction from ``x0`` with weight ``alpha`` (the bending term)."""
+    diffuses the correction from ``x0`` with weight ``alpha`` (the bending term). ``contacts_only`` (a hand-over's
+    rounds): they also end once no vertex is nearer than the margin, no edge meets the surface and none is torn."""
     for rnd in range(MAX_TORN_ROUNDS):
         state.sweep(iterations if rnd < MAX_ROUNDS else TORN_SWEEPS * iterations)
         if rnd == 0 and alpha > 0 and x0 is not None and len(state.con.edges):
             state.diffuse(x0, alpha)
         state.update()
-        if not state.violated() or (rnd + 1 >= MAX_ROUNDS and not state.torn()):
+        if not state.violated(stretch=not contacts_only):
+            if not contacts_only or not state.torn():
+                return
+        elif rnd + 1 >= MAX_ROUNDS and not state.torn():
             return
 
 
@@ -1049,7 +1062,7 @@ def refine(
     for _ in range(MAX_HANDOVERS if fb is not None else 0):  # edges still through the body after the rounds:
         if not state.through() or state.fall_back(fb, EDGE_DEPTH_FROM, HANDOVER_BORDER) is None:
             break
-        _rounds(state, iterations)  # the fallback takes their patches over and the rounds run again
+        _rounds(state, iterations, contacts_only=True)  # the fallback takes their patches over: the rounds again
     # final exact contact projection (contact wins over stretch), re-checked where the body is concave, then the
     # clamp of edges still torn past the simulator's bound (stretch wins there)
     for _ in range(4):

@@ -430,3 +430,27 @@ def test_stretch_wins_over_contact_past_the_torn_bound(sphere):
     assert _stretch(out, tpl, f)[free].max() <= TORN_STRETCH
     assert _signed(out, bv, bf).min() < -0.01
     np.testing.assert_array_equal(out[pinned], x[pinned])
+
+
+def test_hand_over_rounds_end_once_the_contacts_are_clean(sphere, monkeypatch):
+    """Rounds run while a constraint is violated, at most ``MAX_ROUNDS`` (while nothing is torn); a hand-over's
+    rounds (``contacts_only``) end as soon as no vertex is nearer than the margin and no edge meets the surface:
+    a sheet whose pinned sides are pulled 1.3x apart (an infeasible stretch, under the torn bound) far from the
+    obstacle runs all the ordinary rounds and one hand-over round."""
+    import garsim.refine as refine_module
+
+    bv, bf = sphere
+    bv = bv + np.array([0.0, 0.0, -1.0])  # obstacle far away
+    tpl, f = _grid(12, 0.02)
+    x = tpl * np.array([1.3, 1.0, 1.0])
+    pinned = np.abs(tpl[:, 0]) > 0.1
+    state = refine_module._State(
+        x, obstacle(bv, bf), refine_module._constraints(tpl, f, pinned, default_max_stretch("cotton")), 0.002
+    )
+    sweeps = []
+    monkeypatch.setattr(refine_module._State, "sweep", lambda self, iterations: sweeps.append(iterations))
+    refine_module._rounds(state, 10)
+    assert len(sweeps) == MAX_ROUNDS and state.violated() and not state.violated(stretch=False)
+    sweeps.clear()
+    refine_module._rounds(state, 10, contacts_only=True)
+    assert len(sweeps) == 1
