@@ -70,7 +70,8 @@ def test_stretched_region_comes_back_within_limit(sphere):
 
 def test_torn_sheet_gets_the_rounds_it_needs(sphere, monkeypatch):
     """A sheet torn apart (its right half moved 15 cm: 16x edges) closes to within the simulator's 1.5x bound; with
-    only the ordinary rounds it would stay torn."""
+    only the ordinary rounds it would stay torn (the rounds alone: without the final clamp)."""
+    monkeypatch.setattr("garsim.refine.CLAMP_PASSES", 0)
     bv, bf = sphere
     bv = bv + np.array([0.0, 0.0, -1.0])  # obstacle far away
     tpl, f = _grid(30, 0.01)
@@ -79,7 +80,6 @@ def test_torn_sheet_gets_the_rounds_it_needs(sphere, monkeypatch):
     assert _stretch(x, tpl, f).max() > 15.0
     assert _stretch(refine(x, tpl, f, bv, bf, "cotton"), tpl, f).max() <= TORN_STRETCH
     monkeypatch.setattr("garsim.refine.MAX_TORN_ROUNDS", MAX_ROUNDS)
-    monkeypatch.setattr("garsim.refine.CLAMP_PASSES", 0)  # the rounds alone, without the final clamp
     assert _stretch(refine(x, tpl, f, bv, bf, "cotton"), tpl, f).max() > TORN_STRETCH
 
 
@@ -353,13 +353,14 @@ def test_a_torn_long_sleeve_comes_back_within_the_bound(monkeypatch):
     """A real case (tests/fixtures/refine_torn_longsleeve.npz: the shipped model's raw drape of a 902-vertex test
     long-sleeve in a custom fabric, torn to 2.6x at the forearm, and its skinning prior): with the widened blend
     border and repeated hand-overs no edge (rest >= 5 mm, a free end) ends over 1.5x; with the few-ring fade and one
-    hand-over (and without the final clamp) the contacts tear it again (1.9x)."""
+    hand-over the contacts tear it again (1.9x); both without the final clamp."""
     import json
     from pathlib import Path
 
     from garsim.eval.metrics import constraint_figures
     from garsim.garments.fabrics import fabric_from_values
 
+    monkeypatch.setattr("garsim.refine.CLAMP_PASSES", 0)
     fixtures = Path(__file__).parent / "fixtures"
     z = np.load(fixtures / "refine_torn_longsleeve.npz")
     bf = np.load(next((fixtures / "dataset_v2" / "body_faces").glob("*.npy")))
@@ -376,7 +377,6 @@ def test_a_torn_long_sleeve_comes_back_within_the_bound(monkeypatch):
     monkeypatch.setattr("garsim.refine.FALLBACK_BORDER", 1e6)
     monkeypatch.setattr("garsim.refine.HANDOVER_BORDER", 1e6)
     monkeypatch.setattr("garsim.refine.MAX_HANDOVERS", 1)
-    monkeypatch.setattr("garsim.refine.CLAMP_PASSES", 0)
     assert worst(refine(*args, pinned=z["pinned"], fallback=z["prior"])) > 1.7
 
 
@@ -411,7 +411,8 @@ def test_a_raised_knee_in_a_torn_skirt_ends_within_the_bound(monkeypatch):
 
 def test_stretch_wins_over_contact_past_the_torn_bound(sphere):
     """A strip pinned at both ends beside a sphere, with 2.2x its length needed to pass over it: contact wins up to
-    1.5x and stretch beyond, so every edge ends within 1.5x its rest length, the middle of the strip in the sphere."""
+    1.5x and stretch beyond, so every edge ends within 1.5x its rest length, the middle of the strip in the sphere;
+    also beside a triangle whose free vertex sits between two pins pulled 3.5x apart (edges no move can shorten)."""
     bv, bf = sphere
     tpl, f = _grid(12, 0.02)
     tpl = tpl[np.abs(tpl[:, 1]) < 0.035]  # 4 rows of 12
@@ -424,12 +425,20 @@ def test_stretch_wins_over_contact_past_the_torn_bound(sphere):
     x = np.stack([-0.16 * np.cos(angle), tpl[:, 1], 0.16 * np.sin(angle)], axis=1)
     pinned = np.abs(tpl[:, 0]) > 0.1  # the end columns
     assert _stretch(x, tpl, f).max() > 2.0
+    strip = len(tpl)
     out = refine(x, tpl, f, bv, bf, "cotton", pinned=pinned)
     e = unique_edges(f)
     free = ~(pinned[e[:, 0]] & pinned[e[:, 1]])
     assert _stretch(out, tpl, f)[free].max() <= TORN_STRETCH
     assert _signed(out, bv, bf).min() < -0.01
     np.testing.assert_array_equal(out[pinned], x[pinned])
+    corner = np.array([[0.0, 0.0, 0.5], [0.02, 0.0, 0.5], [0.01, 0.017, 0.5]])  # far from the sphere
+    tpl2, f2 = np.concatenate([tpl, corner]), np.concatenate([f, [[strip, strip + 1, strip + 2]]])
+    x2 = np.concatenate([x, corner + np.array([[0.0, 0, 0], [0.05, 0, 0], [0.01, 0.017, 0]])])  # pins 3.5x apart
+    pinned2 = np.concatenate([pinned, [True, True, False]])
+    out2 = refine(x2, tpl2, f2, bv, bf, "cotton", pinned=pinned2)
+    assert _stretch(out2[:strip], tpl, f)[free].max() <= TORN_STRETCH
+    assert _stretch(out2, tpl2, f2).max() > 1.7  # the triangle's free vertex cannot be within 1.5x of both pins
 
 
 def test_hand_over_rounds_end_once_the_contacts_are_clean(sphere, monkeypatch):
@@ -454,3 +463,12 @@ def test_hand_over_rounds_end_once_the_contacts_are_clean(sphere, monkeypatch):
     sweeps.clear()
     refine_module._rounds(state, 10, contacts_only=True)
     assert len(sweeps) == 1
+    torn = refine_module._State(  # pulled 2x apart: torn, so the hand-over rounds go on, longer, to the end
+        tpl * np.array([2.0, 1.0, 1.0]),
+        obstacle(bv, bf),
+        refine_module._constraints(tpl, f, pinned, default_max_stretch("cotton")),
+        0.002,
+    )
+    sweeps.clear()
+    refine_module._rounds(torn, 10, contacts_only=True)
+    assert sweeps == [10] * MAX_ROUNDS + [10 * refine_module.TORN_SWEEPS] * (refine_module.MAX_TORN_ROUNDS - MAX_ROUNDS)
