@@ -294,10 +294,27 @@ def _kernels() -> SimpleNamespace:
                     normal[e, k] = n
                     listed[wp.atomic_add(count, 0, 1)] = e * ts.shape[0] + k
 
+    @wp.func
+    def edge_over(
+        x: wp.array(dtype=wp.vec3d),
+        stretch_edges: wp.array2d(dtype=wp.int32),
+        rest: wp.array(dtype=wp.float64),
+        limit: wp.array(dtype=wp.float64),
+        ratio: wp.float64,
+        scale: wp.float64,
+    ) -> int:
+        """1 if an edge is longer than ``scale`` x the larger of ``ratio`` x its rest length and its limit."""
+        for e in range(stretch_edges.shape[0]):
+            bound = scale * wp.max(ratio * rest[e], limit[e])
+            if wp.length(x[stretch_edges[e, 1]] - x[stretch_edges[e, 0]]) > bound:
+                return 1
+        return 0
+
     @wp.kernel(enable_backward=False, module="unique")
     def violations(
         x: wp.array(dtype=wp.vec3d),
         stretch_edges: wp.array2d(dtype=wp.int32),
+        rest: wp.array(dtype=wp.float64),
         limit: wp.array(dtype=wp.float64),
         mobile: wp.array(dtype=wp.float64),
         d: wp.array(dtype=wp.float64),
@@ -308,12 +325,10 @@ def _kernels() -> SimpleNamespace:
     ):
         """out[0] = 1 if an edge is over its limit (``stretch`` != 0 only), a mobile vertex nearer than the margin or
         an edge meets the surface."""
-        out[0] = 0
-        if stretch != 0:
-            for e in range(stretch_edges.shape[0]):
-                if wp.length(x[stretch_edges[e, 1]] - x[stretch_edges[e, 0]]) > limit[e] * f64(1.0 + _STRETCH_TOL):
-                    out[0] = 1
-                    return
+        out[0] = wp.int32(0)  # (wp in the body: warp resolves the annotations from the body's closure)
+        if stretch != 0 and edge_over(x, stretch_edges, rest, limit, f64(0.0), f64(1.0 + _STRETCH_TOL)) == 1:
+            out[0] = 1
+            return
         for i in range(x.shape[0]):
             if mobile[i] > f64(0.0) and d[i] < margin - f64(_DIST_TOL):
                 out[0] = 1
@@ -333,13 +348,8 @@ def _kernels() -> SimpleNamespace:
         scale: wp.float64,
         out: wp.array(dtype=wp.int32),
     ):
-        """out[0] = 1 if an edge is longer than ``scale`` x the larger of ``ratio`` x its rest length and its limit."""
-        out[0] = 0
-        for e in range(stretch_edges.shape[0]):
-            bound = scale * wp.max(ratio * rest[e], limit[e])
-            if wp.length(x[stretch_edges[e, 1]] - x[stretch_edges[e, 0]]) > bound:
-                out[0] = 1
-                return
+        """out[0] = ``edge_over`` (an edge longer than ``scale`` x max(``ratio`` x rest length, limit))."""
+        out[0] = wp.int32(edge_over(x, stretch_edges, rest, limit, ratio, scale))  # (wp: see violations)
 
     @wp.kernel(enable_backward=False, module="unique")
     def sweeps(
@@ -785,7 +795,7 @@ class _State:
             violations=record(
                 k.violations,
                 1,
-                [x, con.wp_stretch, con.wp_limit, con.wp_mobile, d, buf["hit"], margin, 1, buf["flag"]],
+                [x, con.wp_stretch, con.wp_rest, con.wp_limit, con.wp_mobile, d, buf["hit"], margin, 1, buf["flag"]],
             ),
             torn=record(
                 k.torn_edges, 1, [x, con.wp_stretch, con.wp_rest, con.wp_limit, TORN_STRETCH, 1.0, buf["torn"]]
