@@ -512,7 +512,12 @@ def cmd_train(args: argparse.Namespace) -> int:
         "device": args.device,
         "remesh_copies": args.remesh_copies,
     }
-    losses = {"col": args.collision_weight, "eps": args.collision_eps, "dir": args.direction_weight}
+    losses = {
+        "col": args.collision_weight,
+        "eps": args.collision_eps,
+        "dir": args.direction_weight,
+        "pair": args.pair_weight,
+    }
     cfg = TrainConfig(
         out_dir=args.out,
         collision_start_epoch=args.collision_start,
@@ -834,6 +839,15 @@ def build_parser() -> argparse.ArgumentParser:
         p.add_argument("--device", help="cpu (the documented path), cuda, cuda:N or auto (CUDA when present)"),
         *trainer,
         "device",
+    )
+    _config_default(
+        p.add_argument(
+            "--pair-weight",
+            type=float,
+            help="weight of the paired-fabric term (each paired group in one batch; garsim.train.pairs); 0: off",
+        ),
+        *losses,
+        "pair",
     )
     p.add_argument("--restart", action="store_true", help="ignore an existing checkpoint in --out")
     _config_default(p.add_argument("--threads", type=int, help="torch threads per process"), *trainer, "threads")

@@ -8,13 +8,16 @@ Notes on the paper's equations:
   vertex outside the body; we implement the intended hinge of the works it cites (DeePSD,
   TailorNet): max(ε − N·(Ḡ − B̄), 0) with B̄, N the nearest target-body vertex and its normal.
 
-Two terms the paper does not have (``LossWeights.dir``, used only with the direction + magnitude head),
+Three terms the paper does not have (``LossWeights.dir``, used only with the direction + magnitude head),
 which supervise the two factors of d = d̂ m separately against the simulated displacement r = Ḡ − G^prior:
 a magnitude-weighted cosine loss on the direction, Σ_i |r_i| (1 − d̂_i·r̂_i) / Σ_i |r_i|, and the mean
 |m_i − |r_i|| (metres) on the magnitude. Through Ḡ = G^prior + d̂ m alone, the direction's gradient is
 scaled by m, so while the directions are still random the L2 and smoothing terms shrink m, the softplus
 saturates, and the head stays at the prior (measured: 40 epochs at the prior's error with or without the
-cosine term alone). The prediction is still d̂ m, as in the paper.
+cosine term alone). The prediction is still d̂ m, as in the paper. And ``LossWeights.pair``: in a batch holding
+a paired-fabric group (``garsim.train.pairs``: one template, body and pose in several fabrics), the part of each
+member's error that differs from the group's mean error, ``fabric_pair_loss``: the L2 term sees the few-mm
+differences between fabrics only beside errors ten times larger, this term sees nothing else.
 """
 
 from __future__ import annotations
@@ -45,6 +48,7 @@ class LossWeights:
     beta: float = 0.4
     eps: float = 0.004
     dir: float = 1.0  # weight of the direction + magnitude terms (ours, see the module docstring); that head only
+    pair: float = 0.0  # weight of the paired-fabric term (ours, ``fabric_pair_loss``); 0: off, as in the paper
 
 
 def _graph_ids(data: Data) -> tuple[torch.Tensor, int]:
@@ -168,6 +172,23 @@ def direction_loss(
     return num / den.clamp_min(1e-9) + mag
 
 
+def fabric_pair_loss(
+    pred: torch.Tensor, target: torch.Tensor, pair: torch.Tensor, batch: torch.Tensor, num_graphs: int
+) -> torch.Tensor:
+    """Per graph: mean over its vertices of ‖r_i − mean of r_i over its group‖, r = Ḡ − G the error and the group
+    the batch's graphs of one paired-fabric group (same mesh, vertex i matched to vertex i), (B,); 0 for a graph in
+    no group (``pair`` = -1) or alone in the batch. Zero exactly when every member is off by the same vector field,
+    i.e. when the predicted differences between the fabrics are the simulated ones."""
+    counts = torch.bincount(batch, minlength=num_graphs)
+    pos = torch.arange(batch.shape[0], device=batch.device) - (torch.cumsum(counts, 0) - counts)[batch]
+    group = pair.to(batch.device)[batch]
+    r = pred - target
+    _, slot = torch.unique(torch.stack([group, pos]), dim=1, return_inverse=True)
+    dev = torch.linalg.vector_norm(r - scatter(r, slot, dim=0, reduce="mean")[slot], dim=-1)
+    dev = torch.where(group >= 0, dev, torch.zeros_like(dev))
+    return scatter(dev, batch, dim=0, dim_size=num_graphs, reduce="mean")
+
+
 def garsim_loss(
     pred: torch.Tensor,
     data: Data,
@@ -176,7 +197,7 @@ def garsim_loss(
     direction: torch.Tensor | None = None,
     magnitude: torch.Tensor | None = None,
 ) -> tuple[torch.Tensor, dict[str, torch.Tensor]]:
-    """Eq. 7: total loss (scalar, mean over graphs) and the per-graph terms {l2, sm, nc, col, dir, total} (B,).
+    """Eq. 7: total loss (scalar, mean over graphs) and the per-graph terms {l2, sm, nc, col, dir, pair, total} (B,).
 
     ``direction``, ``magnitude``: the direction + magnitude head's body-frame unit directions and magnitudes
     (``return_parts``), which add the direction term when ``weights.dir`` > 0."""
@@ -191,6 +212,9 @@ def garsim_loss(
     if direction is not None and magnitude is not None and w.dir > 0:
         terms["dir"] = direction_loss(direction, magnitude, data, batch, num_graphs)
         total = total + w.dir * terms["dir"]
+    if w.pair > 0 and getattr(data, "pair", None) is not None:
+        terms["pair"] = fabric_pair_loss(pred, data.target, data.pair, batch, num_graphs)
+        total = total + w.pair * terms["pair"]
     if use_collision:
         if getattr(data, "col_body", None) is None:
             raise ValueError("the collision loss needs graphs built with with_collision=True")

@@ -34,6 +34,7 @@ from garsim.model.config import GarSimConfig, check_known_keys
 from garsim.model.garsim import GraphModel
 from garsim.model.graph import GarmentGraph, build_graph, collate
 from garsim.train.losses import LossWeights, collision_fraction, garsim_loss, per_graph_error_mm
+from garsim.train.pairs import pair_ids, plan_batches
 
 CSV_FIELDS = (
     "epoch",
@@ -107,8 +108,10 @@ class GraphDataset(Dataset):
         with_collision: bool = True,
         cache: bool = True,
         make_graph: Callable[..., GarmentGraph] = build_graph,
+        pair_ids: np.ndarray | None = None,
     ):
-        """``make_graph``: the model's graph builder (``GraphModel.make_graph``, ``build_graph``'s signature)."""
+        """``make_graph``: the model's graph builder (``GraphModel.make_graph``, ``build_graph``'s signature);
+        ``pair_ids``: each sample's paired-fabric group (``train.pairs.pair_ids``), stored as the graphs' ``pair``."""
         if not (hasattr(samples, "__len__") and hasattr(samples, "__getitem__")):
             samples = list(samples)
         if len(samples) == 0:
@@ -118,6 +121,9 @@ class GraphDataset(Dataset):
         self.with_collision = with_collision
         self.cache = cache
         self.make_graph = make_graph
+        self.pair_ids = pair_ids
+        if pair_ids is not None and len(pair_ids) != len(samples):
+            raise ValueError(f"{len(pair_ids)} pair ids for {len(samples)} samples")
         self._graphs: dict[int, GarmentGraph] = {}
 
     def __len__(self) -> int:
@@ -132,6 +138,8 @@ class GraphDataset(Dataset):
             g = self.make_graph(
                 s, self.config, with_collision=self.with_collision, name=str(s.meta.get("name") or f"sample{i}")
             )
+            if self.pair_ids is not None:
+                g.pair = torch.tensor([int(self.pair_ids[i])])
             if self.cache:
                 self._graphs[i] = g
         return g
@@ -205,7 +213,16 @@ class Trainer:
             self.model.load_state_dict(init.state_dict())
         self.model.to(self.device)
         make_graph = self.model.make_graph
-        self.train_set = GraphDataset(train_samples, model_config, with_collision=True, make_graph=make_graph)
+        self.pair_ids = None
+        if train_config.losses.pair > 0:  # paired-fabric groups travel in one batch (garsim.train.pairs)
+            if not (hasattr(train_samples, "__len__") and hasattr(train_samples, "__getitem__")):
+                train_samples = list(train_samples)
+            stored = getattr(train_samples, "originals", train_samples)  # remeshed variants are in no group
+            self.pair_ids = pair_ids(stored, len(train_samples))
+            self._paired_batches = len(self._paired_plan(0))  # the count is the same every epoch
+        self.train_set = GraphDataset(
+            train_samples, model_config, with_collision=True, make_graph=make_graph, pair_ids=self.pair_ids
+        )
         self.val_set = (
             GraphDataset(val_samples, model_config, with_collision=True, make_graph=make_graph)
             if val_samples is not None
@@ -231,10 +248,17 @@ class Trainer:
             self.load_checkpoint(self.out / "checkpoint")
 
     # -- schedule ---------------------------------------------------------------------------
+    def _paired_plan(self, epoch: int) -> list[list[int]]:
+        """This epoch's batches with every paired-fabric group in one batch (all ranks draw the same plan)."""
+        rng = np.random.default_rng([self.cfg.seed, epoch])
+        return plan_batches(self.pair_ids, self.cfg.batch_size, rng)
+
     def steps_per_epoch(self) -> int:
         """Optimizer steps per epoch on this rank."""
-        n = math.ceil(len(self.train_set) / self.world)
-        steps = math.ceil(n / self.cfg.batch_size)
+        if self.pair_ids is not None:
+            steps = math.ceil(self._paired_batches / self.world)
+        else:
+            steps = math.ceil(math.ceil(len(self.train_set) / self.world) / self.cfg.batch_size)
         return min(steps, self.cfg.max_steps_per_epoch) if self.cfg.max_steps_per_epoch else steps
 
     def lr_at(self, step: int) -> float:
@@ -248,6 +272,11 @@ class Trainer:
 
     # -- loops ------------------------------------------------------------------------------
     def _loader(self, epoch: int) -> DataLoader:
+        if self.pair_ids is not None:
+            plan = self._paired_plan(epoch)
+            mine = plan[self.rank :: self.world]
+            mine += plan[: math.ceil(len(plan) / self.world) - len(mine)]  # every rank takes as many steps
+            return DataLoader(self.train_set, batch_sampler=mine, collate_fn=collate)
         if self.world > 1:
             sampler = DistributedSampler(
                 self.train_set, num_replicas=self.world, rank=self.rank, shuffle=True, seed=self.cfg.seed

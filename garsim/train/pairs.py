@@ -1,0 +1,60 @@
+"""Paired-fabric groups in training: which samples share one template, body and pose (and differ only in the
+fabric), and batches that keep each group together so that ``losses.fabric_pair_loss`` can compare them.
+
+A group is the stored (not remeshed, not rest) samples of one paired job at one frame and one mesh level: the
+same template, prior and body, four fabrics. Inside a batch of such a group the simulated differences between
+fabrics are the only signal of what the fabric changes; the pair loss asks the network for the same differences.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+
+from garsim.data.sample import Sample
+
+
+def pair_key(sample: Sample) -> str | None:
+    """The paired-fabric group of a stored training sample, or None (unpaired, rest or remeshed samples)."""
+    meta = sample.meta
+    if not meta.get("paired") or meta.get("rest") or "remesh" in meta or "job" not in meta:
+        return None
+    return f"{meta['job']}@{meta.get('frame', 0)}#{len(sample.garment)}"
+
+
+def pair_ids(samples: Sequence[Sample], count: int | None = None) -> np.ndarray:
+    """(count,) int64 group id of each sample (-1: in no group of two or more). Only the first ``len(samples)``
+    of ``count`` indices are looked at (the rest, e.g. remeshed variants appended after them, are -1)."""
+    keys = [pair_key(s) for s in samples]
+    sizes: dict[str, int] = {}
+    for k in keys:
+        if k is not None:
+            sizes[k] = sizes.get(k, 0) + 1
+    groups = {k: g for g, k in enumerate(sorted(k for k, n in sizes.items() if n > 1))}
+    ids = np.full(len(samples) if count is None else count, -1, dtype=np.int64)
+    ids[: len(keys)] = [groups.get(k, -1) if k is not None else -1 for k in keys]
+    return ids
+
+
+def plan_batches(ids: np.ndarray, batch_size: int, rng: np.random.Generator) -> list[list[int]]:
+    """Every index once, in batches of at most ``batch_size``: each group (ids >= 0) in one batch (groups larger
+    than a batch in consecutive chunks of it), topped up with ungrouped indices; the rest in full batches; batch
+    order shuffled. The number of batches depends only on the group sizes, not on ``rng``."""
+    if batch_size < 1:
+        raise ValueError(f"batch_size must be >= 1, got {batch_size}")
+    ids = np.asarray(ids)
+    singles = list(rng.permutation(np.flatnonzero(ids < 0)))
+    grouped = np.flatnonzero(ids >= 0)
+    groups = [grouped[ids[grouped] == g] for g in np.unique(ids[grouped])]
+    batches: list[list[int]] = []
+    for g in rng.permutation(len(groups)) if groups else []:
+        members = [int(i) for i in groups[g]]
+        for start in range(0, len(members), batch_size):
+            batch = members[start : start + batch_size]
+            fill = min(batch_size - len(batch), len(singles))
+            batch += [int(i) for i in singles[:fill]]
+            del singles[:fill]
+            batches.append(batch)
+    batches += [[int(i) for i in singles[s : s + batch_size]] for s in range(0, len(singles), batch_size)]
+    return [batches[i] for i in rng.permutation(len(batches))]

@@ -1,0 +1,103 @@
+"""Paired-fabric groups: keys, batch plans that keep a group together, the pair loss on hand-computed cases, and a
+training run whose pair term falls."""
+
+import dataclasses
+
+import numpy as np
+import pytest
+import torch
+from model_fixtures import make_sample, make_samples
+
+from garsim.data.sample import FABRICS
+from garsim.model.config import GarSimConfig
+from garsim.train.data import rest_sample
+from garsim.train.losses import LossWeights, fabric_pair_loss, garsim_loss
+from garsim.train.pairs import pair_ids, pair_key, plan_batches
+from garsim.train.trainer import TrainConfig, Trainer
+
+
+def _paired(job: str = "train-00003", frame: int = 0, seed: int = 3):
+    """One template, body and pose in the four fabrics (the fixture's truth depends on the fabric)."""
+    return [
+        dataclasses.replace(
+            s, meta={**s.meta, "job": job, "frame": frame, "paired": True, "name": f"{job}-{s.fabric}@{frame}"}
+        )
+        for s in (make_sample(fabric=f, seed=seed) for f in FABRICS)
+    ]
+
+
+def test_keys_name_stored_paired_samples_only():
+    group = _paired()
+    assert len({pair_key(s) for s in group}) == 1 and pair_key(group[0]).startswith("train-00003@0#")
+    assert pair_key(make_sample()) is None  # not paired
+    assert pair_key(rest_sample(group[0])) is None
+    remeshed = dataclasses.replace(group[0], meta={**group[0].meta, "remesh": {"variant": 0}})
+    assert pair_key(remeshed) is None
+    lone = _paired(job="train-00007")[:1]
+    ids = pair_ids([*group, make_sample(), *lone], count=8)
+    assert ids.tolist() == [0, 0, 0, 0, -1, -1, -1, -1]  # a group of one is no group; padded indices are in none
+
+
+def test_plans_keep_groups_together_and_cover_every_index_once():
+    ids = np.array([-1] * 13 + [0] * 4 + [1] * 4 + [2] * 6)
+    counts = set()
+    for seed in range(5):
+        plan = plan_batches(ids, 4, np.random.default_rng(seed))
+        assert sorted(i for b in plan for i in b) == list(range(len(ids)))
+        assert all(len(b) <= 4 for b in plan)
+        for g in (0, 1):
+            assert sum(set(np.flatnonzero(ids == g)) <= set(b) for b in plan) == 1
+        big = [b for b in plan if any(ids[i] == 2 for i in b)]
+        assert sorted(len([i for i in b if ids[i] == 2]) for b in big) == [2, 4]  # a 6-group in chunks of 4 and 2
+        counts.add(len(plan))
+    assert counts == {7}  # 4 + 4 + 4 + (2 + 2 singles) + 11 singles in 3 -> the count does not depend on the draw
+    with pytest.raises(ValueError, match="batch_size"):
+        plan_batches(ids, 0, np.random.default_rng(0))
+
+
+def test_pair_loss_is_the_deviation_from_the_groups_mean_error():
+    """Two 3-vertex graphs of one group with errors c + a and c - a, a third graph in no group."""
+    target = torch.zeros(9, 3)
+    c, a = torch.tensor([0.5, -0.2, 0.1]), torch.tensor([0.0, 0.03, 0.04])  # |a| = 0.05
+    pred = torch.cat([(c + a).expand(3, 3), (c - a).expand(3, 3), torch.full((3, 3), 7.0)])
+    batch = torch.arange(3).repeat_interleave(3)
+    loss = fabric_pair_loss(pred, target, torch.tensor([5, 5, -1]), batch, 3)
+    assert loss.tolist() == pytest.approx([0.05, 0.05, 0.0])
+    same = torch.cat([c.expand(6, 3), torch.zeros(3, 3)])
+    assert fabric_pair_loss(same, target, torch.tensor([5, 5, -1]), batch, 3).abs().max() == 0
+    alone = fabric_pair_loss(pred, target, torch.tensor([5, 6, -1]), batch, 3)
+    assert alone.abs().max() == 0  # one member per group in the batch: nothing to compare
+
+
+def test_training_with_the_pair_term_batches_groups_and_reduces_it(tmp_path):
+    """A run on two paired groups and unpaired samples: every batch of the plan holds whole groups, and the pair
+    term alone (the fabric-dependent part of the error; measured 3.9 -> 2.9 mm in 60 steps) falls; with weight 0
+    no graph carries a group id."""
+    samples = [*_paired(), *_paired(job="train-00011", seed=5), *make_samples(3, seed=20)]
+    cfg = TrainConfig(
+        out_dir=str(tmp_path / "run"),
+        epochs=20,
+        batch_size=4,
+        lr=1e-2,
+        warmup_steps=2,
+        progress=False,
+        losses=LossWeights(l2=0.0, sm=0.0, nc=0.0, pair=1.0),
+    )
+    small = GarSimConfig(latent=32, edge_latent=16, mlp_hidden=32, num_steps=2)
+    trainer = Trainer(small, cfg, samples, None)
+    assert trainer.pair_ids.tolist() == [0] * 4 + [1] * 4 + [-1] * 3
+    assert trainer.steps_per_epoch() == 3
+    from garsim.model.graph import collate
+
+    def pair_term() -> float:
+        batch = collate([trainer.train_set[i] for i in range(4)])
+        with torch.no_grad():
+            _, terms = garsim_loss(trainer.model(batch), batch, cfg.losses)
+        return float(terms["pair"].mean())
+
+    before = pair_term()
+    assert before > 0
+    trainer.fit()
+    assert pair_term() < 0.85 * before
+    plain = Trainer(small, dataclasses.replace(cfg, out_dir=str(tmp_path / "plain"), losses=LossWeights()), samples)
+    assert plain.pair_ids is None and "pair" not in plain.train_set[0]
