@@ -34,6 +34,7 @@ def test_plan_is_deterministic_and_split_without_leakage(tmp_path):
     assert len(paired) == 12 and all(
         [f["name"] for f in j.fabrics] == ["silk", "cotton", "denim", "leather"] for j in paired
     )
+    assert {(j.family, j.construction) for j in paired} == {(j.family, j.construction) for j in train}
     assert any(j.fabrics[0]["name"] == "custom" for j in train)  # physical values between the presets
     assert all(cfg.min_vertices <= j.vertices <= cfg.max_vertices for j in jobs)
 
@@ -143,6 +144,11 @@ def test_a_rerun_with_other_settings_is_refused(tmp_path, monkeypatch):
         gen.generate(GenerateConfig(out=tmp_path, seed=1, num_train=2, workers=1), progress=False)
     with pytest.raises(ValueError, match="max_vertices"):
         gen.generate(GenerateConfig(out=tmp_path, max_vertices=900, num_train=2, workers=1), progress=False)
+    stored = json.loads((tmp_path / gen.CONFIG_FILE).read_text())
+    del stored["plan_version"]  # a folder planned before paired groups rotated over the families
+    (tmp_path / gen.CONFIG_FILE).write_text(json.dumps(stored))
+    with pytest.raises(ValueError, match="plan_version=None, this run has plan_version=2"):
+        gen.generate(GenerateConfig(out=tmp_path, num_train=4, num_test=1, num_ood=0, workers=1), progress=False)
 
 
 def test_shards_partition_the_jobs(tmp_path, monkeypatch):

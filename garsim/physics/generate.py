@@ -55,6 +55,8 @@ arms in that range (``ARM_BELOW_CANONICAL``, ``ARM_ABOVE_CANONICAL``)."""
 ARM_BELOW_CANONICAL = 50.0
 ARM_ABOVE_CANONICAL = 25.0
 CONSTRUCTIONS: tuple[str, ...] = ("template", "implicit")
+PAIRING_CYCLE = len(FAMILIES) * len(CONSTRUCTIONS)
+"""Jobs in one pass over every family and construction (a job's family is j % 6, its construction (j // 6) % 2)."""
 WAIST_FAMILIES: frozenset[str] = frozenset({"skirt", "trousers"})
 SHOULDER_PIN_BAND = 0.04
 """m: garments hung from the shoulders keep only the pins this close below their highest pin (pins that run
@@ -102,6 +104,7 @@ class GenerateConfig:
     shard: tuple[int, int] = (0, 1)  # (k, n): run jobs with index % n == k
     limit: int | None = None  # run at most this many pending jobs (smoke runs)
     sim: dict[str, Any] = field(default_factory=dict)  # SimConfig overrides
+    plan_version: int = 2  # the job-planning rule (2: paired groups in every family); other folders are refused
 
     def __post_init__(self) -> None:
         self.out = Path(self.out)
@@ -220,7 +223,9 @@ def plan_jobs(config: GenerateConfig) -> list[JobSpec]:
                     if construction == "template"
                     else sample_implicit_params(family, rng)
                 )
-            paired = j % config.paired_every == config.paired_every - 1
+            # the paired slot moves on by one every family x construction cycle: with a fixed j % k, k = 4, only
+            # every other family (and one construction) was ever paired
+            paired = (j + j // PAIRING_CYCLE) % config.paired_every == config.paired_every - 1
             hi = config.max_paired_vertices if paired else config.max_vertices
             lo = min(config.min_vertices, hi)
             vertices = int(round(math.exp(rng.uniform(math.log(lo), math.log(hi)))))
