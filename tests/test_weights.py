@@ -19,13 +19,19 @@ def test_shipped_weights_are_small_safetensors():
     assert not any(name.endswith((".pt", ".pth", ".pkl", ".bin")) for name in files)  # nothing to unpickle
 
 
-def test_shipped_model_beats_the_prior_on_the_fixture():
+def test_shipped_model_beats_the_prior_on_the_fixture_in_every_family():
+    """v0.5, mean mm (model / prior): t-shirt 57.5 / 63.8, skirt 24.0 / 42.4, top 24.9 / 25.1, long-sleeve
+    31.4 / 33.6, trousers 20.4 / 30.3, dress 39.5 / 47.5."""
     sim = GarSim.pretrained()
-    samples = [s for s in DatasetStore(FIXTURE).samples(resolution="low") if s.garment_type in ("skirt", "top")]
+    samples = DatasetStore(FIXTURE).samples(resolution="low")
     preds = sim.model.predict(samples)
-    model_err = np.mean([euclidean_error_mm(p, s.target) for p, s in zip(preds, samples)])
-    prior_err = np.mean([euclidean_error_mm(s.prior, s.target) for s in samples])
-    assert model_err < prior_err, (model_err, prior_err)
+    errors: dict[str, list[tuple[float, float]]] = {}
+    for p, s in zip(preds, samples):
+        errors.setdefault(s.garment_type, []).append(
+            (euclidean_error_mm(p, s.target), euclidean_error_mm(s.prior, s.target))
+        )
+    means = {family: np.mean(pairs, axis=0) for family, pairs in errors.items()}
+    assert len(means) == 6 and all(model < prior for model, prior in means.values()), means
 
 
 def test_pretrained_drape_through_the_public_api(anny_body):
