@@ -11,7 +11,8 @@
 #   STAGE1_EPOCHS [300], STAGE2_EPOCHS [40]
 #   REMESH [0]         remeshed variants of every training sample in stage 1 (garsim train --remesh-copies)
 #   PAIR [0]           weight of the paired-fabric term (garsim train --pair-weight)
-# v0.5 (garsim/weights/MODEL_CARD.md): PROCS=1 BATCH=8 LR=5e-4 STAGE1_EPOCHS=35 STAGE2_EPOCHS=0 REMESH=2 PAIR=2.
+# v0.5 (garsim/weights/MODEL_CARD.md): PROCS=1 BATCH=8 LR=5e-4 STAGE1_EPOCHS=30 STAGE2_EPOCHS=0 REMESH=2 (and PAIR=2:
+# the paired-fabric candidate of docs/studies/pair_loss.md, not shipped).
 # Then ship: .venv/bin/python -c "from garsim.model.garsim import GarSimModel;
 #   GarSimModel.load('$OUT/stage1/best').save('garsim/weights')"   (stage2/best when stage 2 ran)
 set -euo pipefail
