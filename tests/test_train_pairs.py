@@ -67,6 +67,8 @@ def test_pair_loss_is_the_deviation_from_the_groups_mean_error():
     assert fabric_pair_loss(same, target, torch.tensor([5, 5, -1]), batch, 3).abs().max() == 0
     alone = fabric_pair_loss(pred, target, torch.tensor([5, 6, -1]), batch, 3)
     assert alone.abs().max() == 0  # one member per group in the batch: nothing to compare
+    none = fabric_pair_loss(pred, target, torch.tensor([-1, -1, -1]), batch, 3)
+    assert none.tolist() == [0.0, 0.0, 0.0]  # no grouped graph in the batch
 
 
 def test_training_with_the_pair_term_batches_groups_and_reduces_it(tmp_path):

@@ -182,10 +182,11 @@ def fabric_pair_loss(
     counts = torch.bincount(batch, minlength=num_graphs)
     pos = torch.arange(batch.shape[0], device=batch.device) - (torch.cumsum(counts, 0) - counts)[batch]
     group = pair.to(batch.device)[batch]
-    r = pred - target
-    _, slot = torch.unique(torch.stack([group, pos]), dim=1, return_inverse=True)
-    dev = torch.linalg.vector_norm(r - scatter(r, slot, dim=0, reduce="mean")[slot], dim=-1)
-    dev = torch.where(group >= 0, dev, torch.zeros_like(dev))
+    dev = torch.zeros(batch.shape[0], dtype=pred.dtype, device=pred.device)
+    sel = torch.nonzero(group >= 0).ravel()  # vertices of grouped graphs only
+    r = pred[sel] - target[sel]
+    _, slot = torch.unique(torch.stack([group[sel], pos[sel]]), dim=1, return_inverse=True)
+    dev = dev.index_put((sel,), torch.linalg.vector_norm(r - scatter(r, slot, dim=0, reduce="mean")[slot], dim=-1))
     return scatter(dev, batch, dim=0, dim_size=num_graphs, reduce="mean")
 
 

@@ -8,6 +8,7 @@ fabrics are the only signal of what the fabric changes; the pair loss asks the n
 
 from __future__ import annotations
 
+from collections import Counter
 from collections.abc import Sequence
 
 import numpy as np
@@ -27,13 +28,10 @@ def pair_ids(samples: Sequence[Sample], count: int | None = None) -> np.ndarray:
     """(count,) int64 group id of each sample (-1: in no group of two or more). Only the first ``len(samples)``
     of ``count`` indices are looked at (the rest, e.g. remeshed variants appended after them, are -1)."""
     keys = [pair_key(s) for s in samples]
-    sizes: dict[str, int] = {}
-    for k in keys:
-        if k is not None:
-            sizes[k] = sizes.get(k, 0) + 1
+    sizes = Counter(k for k in keys if k is not None)
     groups = {k: g for g, k in enumerate(sorted(k for k, n in sizes.items() if n > 1))}
     ids = np.full(len(samples) if count is None else count, -1, dtype=np.int64)
-    ids[: len(keys)] = [groups.get(k, -1) if k is not None else -1 for k in keys]
+    ids[: len(keys)] = [groups.get(k, -1) for k in keys]
     return ids
 
 
@@ -48,7 +46,7 @@ def plan_batches(ids: np.ndarray, batch_size: int, rng: np.random.Generator) -> 
     grouped = np.flatnonzero(ids >= 0)
     groups = [grouped[ids[grouped] == g] for g in np.unique(ids[grouped])]
     batches: list[list[int]] = []
-    for g in rng.permutation(len(groups)) if groups else []:
+    for g in rng.permutation(len(groups)):
         members = [int(i) for i in groups[g]]
         for start in range(0, len(members), batch_size):
             batch = members[start : start + batch_size]

@@ -108,10 +108,11 @@ class GraphDataset(Dataset):
         with_collision: bool = True,
         cache: bool = True,
         make_graph: Callable[..., GarmentGraph] = build_graph,
-        pair_ids: np.ndarray | None = None,
+        pairs: bool = False,
     ):
         """``make_graph``: the model's graph builder (``GraphModel.make_graph``, ``build_graph``'s signature);
-        ``pair_ids``: each sample's paired-fabric group (``train.pairs.pair_ids``), stored as the graphs' ``pair``."""
+        ``pairs``: give every graph its paired-fabric group (``train.pairs.pair_ids``) as ``pair``; remeshed
+        variants appended after the stored samples (``augment.RemeshAugmented``) are in none."""
         if not (hasattr(samples, "__len__") and hasattr(samples, "__getitem__")):
             samples = list(samples)
         if len(samples) == 0:
@@ -121,9 +122,7 @@ class GraphDataset(Dataset):
         self.with_collision = with_collision
         self.cache = cache
         self.make_graph = make_graph
-        self.pair_ids = pair_ids
-        if pair_ids is not None and len(pair_ids) != len(samples):
-            raise ValueError(f"{len(pair_ids)} pair ids for {len(samples)} samples")
+        self.pair_ids = pair_ids(getattr(samples, "originals", samples), len(samples)) if pairs else None
         self._graphs: dict[int, GarmentGraph] = {}
 
     def __len__(self) -> int:
@@ -213,16 +212,13 @@ class Trainer:
             self.model.load_state_dict(init.state_dict())
         self.model.to(self.device)
         make_graph = self.model.make_graph
-        self.pair_ids = None
-        if train_config.losses.pair > 0:  # paired-fabric groups travel in one batch (garsim.train.pairs)
-            if not (hasattr(train_samples, "__len__") and hasattr(train_samples, "__getitem__")):
-                train_samples = list(train_samples)
-            stored = getattr(train_samples, "originals", train_samples)  # remeshed variants are in no group
-            self.pair_ids = pair_ids(stored, len(train_samples))
-            self._paired_batches = len(self._paired_plan(0))  # the count is the same every epoch
+        pairs = train_config.losses.pair > 0  # paired-fabric groups travel in one batch (garsim.train.pairs)
         self.train_set = GraphDataset(
-            train_samples, model_config, with_collision=True, make_graph=make_graph, pair_ids=self.pair_ids
+            train_samples, model_config, with_collision=True, make_graph=make_graph, pairs=pairs
         )
+        self.pair_ids = self.train_set.pair_ids
+        if pairs:
+            self._paired_batches = len(self._paired_plan(0))  # the count is the same every epoch
         self.val_set = (
             GraphDataset(val_samples, model_config, with_collision=True, make_graph=make_graph)
             if val_samples is not None
