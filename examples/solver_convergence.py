@@ -7,6 +7,7 @@ and the floor of those vertex distances: the largest budget once more with gravi
 folds can land elsewhere under any perturbation).
 
 Usage: python examples/solver_convergence.py [--vertices 1200] [--fabric cotton] [--budgets 10x4 20x8 40x8]
+       [--families skirt dress]
        [--out docs/studies/solver_convergence.json]
 """
 
@@ -32,25 +33,37 @@ PERTURBATION = 1e-3
 """Relative change of gravity of the floor run."""
 
 
-def budget_config(budget: str, gravity_scale: float = 1.0) -> SimConfig:
-    """``SimConfig`` of a 'SUBSTEPSxITERATIONS' budget, with the default's damping per second."""
+def budget_config(budget: str, gravity_scale: float = 1.0, **overrides: float) -> SimConfig:
+    """``SimConfig`` of a 'SUBSTEPSxITERATIONS' budget, with the default's damping per second (``overrides``: other
+    ``SimConfig`` fields, e.g. the settling criterion)."""
     substeps, iterations = (int(v) for v in budget.lower().split("x"))
     base = SimConfig()
     damping = base.damping ** (base.substeps / substeps)
-    return SimConfig(substeps=substeps, iterations=iterations, damping=damping, gravity=base.gravity * gravity_scale)
+    return SimConfig(
+        substeps=substeps, iterations=iterations, damping=damping, gravity=base.gravity * gravity_scale, **overrides
+    )
 
 
-def main(vertices: int, fabric: str, budgets: list[str], out: Path) -> dict:
+def main(
+    vertices: int,
+    fabric: str,
+    budgets: list[str],
+    out: Path,
+    families: tuple[str, ...] = FAMILIES,
+    criterion: dict | None = None,
+) -> dict:
+    """Settle one template per family at every budget; ``criterion``: ``SimConfig`` overrides of the settling test."""
+    criterion = criterion or {}
     body = AnnyBody({})
     can = body.canonical()
-    report: dict = {"vertices": vertices, "fabric": fabric, "budgets": budgets, "families": {}}
-    for family in FAMILIES:
+    report: dict = {"vertices": vertices, "fabric": fabric, "budgets": budgets, "settle": criterion, "families": {}}
+    for family in families:
         g = make_garment(family, body, target_vertices=vertices)
         rest = edge_lengths(g.vertices, g.faces)
         states, rows = {}, {}
         for budget in budgets:
             t0 = time.process_time()
-            v, info = settle(g, can.vertices, body.faces, fabric, budget_config(budget))
+            v, info = settle(g, can.vertices, body.faces, fabric, budget_config(budget, **criterion))
             ratio = edge_lengths(v, g.faces) / rest
             states[budget] = v.astype(np.float64)
             rows[budget] = {
@@ -61,7 +74,7 @@ def main(vertices: int, fabric: str, budgets: list[str], out: Path) -> dict:
                 "cpu_s": time.process_time() - t0,
             }
         ref = states[budgets[-1]]
-        floor, _ = settle(g, can.vertices, body.faces, fabric, budget_config(budgets[-1], 1 + PERTURBATION))
+        floor, _ = settle(g, can.vertices, body.faces, fabric, budget_config(budgets[-1], 1 + PERTURBATION, **criterion))
         floor_gap = np.linalg.norm(floor - ref, axis=1)
         for budget, row in rows.items():
             gap = np.linalg.norm(states[budget] - ref, axis=1)
@@ -88,6 +101,10 @@ if __name__ == "__main__":
     p.add_argument(
         "--budgets", nargs="+", default=["10x4", "20x8", "40x8", "80x8"], help="SUBSTEPSxITERATIONS, default first"
     )
+    p.add_argument("--families", nargs="+", default=list(FAMILIES), choices=FAMILIES)
+    p.add_argument("--settle-speed", type=float, default=SimConfig.settle_speed, help="m/s: settled below this")
+    p.add_argument("--max-settle-frames", type=int, default=SimConfig.max_settle_frames)
     p.add_argument("--out", type=Path, default=Path("docs/studies/solver_convergence.json"))
     args = p.parse_args()
-    main(args.vertices, args.fabric, args.budgets, args.out)
+    criterion = {"settle_speed": args.settle_speed, "max_settle_frames": args.max_settle_frames}
+    main(args.vertices, args.fabric, args.budgets, args.out, tuple(args.families), criterion)

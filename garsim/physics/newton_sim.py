@@ -48,17 +48,16 @@ class SimConfig:
     """Time stepping, settling and contact parameters of the Newton VBD simulation."""
 
     fps: float = 30.0  # stored frames per simulated second
-    # VBD's residual stretch falls faster with smaller steps than with more iterations per step: 5 substeps x 5
-    # iterations left sleeves and crotches stretched 1.6-2.2x, 5 x 15 passed; 3 x 15 stretched ~2.8x more than
-    # 5 x 15 (top: mean edge +6.9% vs +2.4%); 10 x 4 (with collision every 2nd substep, the same detection rate per
-    # second as 5 x 15) matches 5 x 15's stretch (skirt +0.56% / p99 1.050 vs 1.051; top template +1.13% vs +1.18%)
-    # for 0.57x the CPU per accepted settled sample (24.8 -> 14.2 s on six seed-1 jobs, one per family, all 27
-    # samples accepted either way; settled states 5 mm mean from 5 x 15's, whose own move 0.6-6 mm under a 0.1%
-    # change of gravity);
-    # 10 x 3 stretched more again (+0.75%); collision every 5th substep reached 1.49x edges.
-    substeps: int = 10  # VBD steps per frame
+    # The solver budget (substeps x iterations per frame) sets the ground truth, not only its cost: a settled drape
+    # is a different rest state at every budget, with or without a 10x stricter settling test
+    # (docs/studies/solver_convergence.md). 10 x 4 (the v1-v3 data) left edges stretched +0.7% (p99 +5-9%) and
+    # drapes 10-42 mm (mean per vertex) from 80 x 8's. At 160 iterations per frame, smaller steps beat more
+    # iterations: 40 x 4 lands 6-18 mm from 80 x 8 (20 x 8: 10-22, 10 x 16: 14-27) at about 20 x 8's CPU per settle,
+    # ~2x 10 x 4's per sample (fewer frames to settle); 40 x 8 (3-12 mm) costs another ~1.5-2x. 80 x 8 itself is not
+    # the limit for skirts and dresses (their distance to the body still grows 4-7 mm from 40 x 8 to 80 x 8).
+    substeps: int = 40  # VBD steps per frame
     iterations: int = 4  # VBD iterations per step
-    damping: float = 0.9747  # velocity factor after every substep (0.95 per 1/150 s before: the same drag per second)
+    damping: float = 0.993614  # velocity factor after every substep: 0.9747 per 1/300 s before, the same drag per second
     settle_damping: float | None = None  # damping while settling (template, holds); None = ``damping``
     settle_iterations: int | None = None  # VBD iterations while settling; None = ``iterations``
     settle_speed: float = 0.02  # m/s: settled when the mean free-vertex speed stays below this
