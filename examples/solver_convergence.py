@@ -74,7 +74,8 @@ def main(
                 "cpu_s": time.process_time() - t0,
             }
         ref = states[budgets[-1]]
-        floor, _ = settle(g, can.vertices, body.faces, fabric, budget_config(budgets[-1], 1 + PERTURBATION, **criterion))
+        floor_cfg = budget_config(budgets[-1], 1 + PERTURBATION, **criterion)
+        floor, _ = settle(g, can.vertices, body.faces, fabric, floor_cfg)
         floor_gap = np.linalg.norm(floor - ref, axis=1)
         for budget, row in rows.items():
             gap = np.linalg.norm(states[budget] - ref, axis=1)

@@ -57,7 +57,7 @@ class SimConfig:
     # the limit for skirts and dresses (their distance to the body still grows 4-7 mm from 40 x 8 to 80 x 8).
     substeps: int = 40  # VBD steps per frame
     iterations: int = 4  # VBD iterations per step
-    damping: float = 0.993614  # velocity factor after every substep: 0.9747 per 1/300 s before, the same drag per second
+    damping: float = 0.993614  # velocity factor per substep: 0.9747 per 1/300 s before, the same drag per second
     settle_damping: float | None = None  # damping while settling (template, holds); None = ``damping``
     settle_iterations: int | None = None  # VBD iterations while settling; None = ``iterations``
     settle_speed: float = 0.02  # m/s: settled when the mean free-vertex speed stays below this
