@@ -189,3 +189,7 @@ def test_solver_convergence_budgets_keep_the_damping_per_second():
         assert (cfg.substeps, cfg.iterations, cfg.gravity) == (substeps, iterations, base.gravity)
         assert cfg.damping ** (cfg.substeps * cfg.fps) == pytest.approx(per_second, rel=1e-9)
     assert module.budget_config("40x8", 1.001).gravity == pytest.approx(1.001 * base.gravity)
+    default = module.budget_config(f"{base.substeps}x{base.iterations}")
+    assert (default.substeps, default.iterations, default.damping) == (base.substeps, base.iterations, base.damping)
+    strict = module.budget_config("20x8", settle_speed=0.002, max_settle_frames=300)  # the stricter settling test
+    assert (strict.settle_speed, strict.max_settle_frames, strict.substeps) == (0.002, 300, 20)
