@@ -1,8 +1,10 @@
-"""Export the committed test fixture (a few MB) from a generated v2 dataset: one low-resolution record per
-garment family and construction, every canonical pose, one record with physical fabric values and one
-complete paired-fabric group (last settled state of each).
+"""Export the committed test fixture (a few MB) from generated v2 datasets: from the test store one low-resolution
+record per garment family and construction, every canonical pose and fabric, and one complete paired-fabric group;
+from the training store one record of each of four families (skirt, t-shirt, trousers, dress: a few training jobs
+for the trainer's and the studies' tests, no top so that a family stays unseen); last settled state of each.
 
-Run: .venv/bin/python examples/make_fixture.py --data ~/garsim-data/v3 [--out tests/fixtures/dataset_v2]
+Run: .venv/bin/python examples/make_fixture.py --data ~/garsim-data/v4test --train-data ~/garsim-data/v4
+     [--out tests/fixtures/dataset_v2]
 """
 
 from __future__ import annotations
@@ -13,14 +15,12 @@ from pathlib import Path
 
 from garsim.data.store import DatasetStore
 
+TRAIN_FAMILIES = ("skirt", "tshirt", "trousers", "dress")
 
-def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__)
-    parser.add_argument("--data", required=True)
-    parser.add_argument("--out", default="tests/fixtures/dataset_v2")
-    args = parser.parse_args()
-    store = DatasetStore(args.data)
-    entries = [e for e in store.entries() if e["split"] in ("test", "ood", "train")]
+
+def test_ids(store: DatasetStore) -> list[str]:
+    """One record per family/construction, canonical pose and fabric, plus the first complete paired group."""
+    entries = [e for e in store.entries() if e["split"] in ("test", "ood")]
     chosen: dict[str, str] = {}
     for e in sorted(entries, key=lambda e: (e["split"] != "test", e["id"])):
         for key in (
@@ -34,13 +34,35 @@ def main() -> None:
         if e.get("paired"):
             groups.setdefault(e["job"], []).append(e["id"])
     complete = sorted((g for g in groups.values() if len(g) == 4), key=lambda g: g[0])
-    ids = sorted(set(chosen.values()) | (set(complete[0]) if complete else set()))
+    return sorted(set(chosen.values()) | (set(complete[0]) if complete else set()))
+
+
+def train_ids(store: DatasetStore) -> list[str]:
+    """The first unpaired training record of each of ``TRAIN_FAMILIES``."""
+    chosen: dict[str, str] = {}
+    for e in sorted(store.entries(), key=lambda e: e["id"]):
+        if e["split"] == "train" and not e.get("paired") and e["garment_type"] in TRAIN_FAMILIES:
+            chosen.setdefault(e["garment_type"], e["id"])
+    return sorted(chosen.values())
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__)
+    parser.add_argument("--data", required=True, help="dataset with the test (and ood) split")
+    parser.add_argument("--train-data", required=True, help="dataset with the training split")
+    parser.add_argument("--out", default="tests/fixtures/dataset_v2")
+    args = parser.parse_args()
     out = Path(args.out)
     if out.exists():
         shutil.rmtree(out)
-    store.export_subset(out, ids, frames=1, resolutions=("low",))
+    n = 0
+    for src, pick in ((args.data, test_ids), (args.train_data, train_ids)):
+        store = DatasetStore(src)
+        ids = pick(store)
+        store.export_subset(out, ids, frames=1, resolutions=("low",))
+        n += len(ids)
     size = sum(p.stat().st_size for p in out.rglob("*") if p.is_file())
-    print(f"{out}: {len(ids)} records, {size / 2**20:.1f} MB")
+    print(f"{out}: {n} records, {size / 2**20:.1f} MB")
 
 
 if __name__ == "__main__":

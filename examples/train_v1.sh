@@ -11,6 +11,7 @@
 #   STAGE1_EPOCHS [300], STAGE2_EPOCHS [40]
 #   REMESH [0]         remeshed variants of every training sample in stage 1 (garsim train --remesh-copies)
 #   PAIR [0]           weight of the paired-fabric term (garsim train --pair-weight)
+#   MIRROR [0]         1: every training sample also mirrored left to right in stage 1 (garsim train --mirror)
 # v0.5 (garsim/weights/MODEL_CARD.md): PROCS=1 BATCH=8 LR=5e-4 STAGE1_EPOCHS=30 STAGE2_EPOCHS=0 REMESH=2 (and PAIR=2:
 # the paired-fabric candidate of docs/studies/pair_loss.md, not shipped).
 # Then ship: .venv/bin/python -c "from garsim.model.garsim import GarSimModel;
@@ -29,8 +30,11 @@ fi
 TRAIN=("${LAUNCH[@]}" train --data "$DATA" --batch-size "${BATCH:-4}" --quiet --collision-weight 10
   --collision-eps 0.002 --pair-weight "${PAIR:-0}")
 EPOCHS1=${STAGE1_EPOCHS:-300}
+MIRROR_FLAG=()
+if [ "${MIRROR:-0}" = 1 ]; then MIRROR_FLAG=(--mirror); fi
 "${TRAIN[@]}" --out "$OUT/stage1" --resolution low --epochs "$EPOCHS1" --lr "${LR:-1e-3}" --head displacement \
-  --collision-start $((EPOCHS1 * 2 / 3)) --remesh-copies "${REMESH:-0}"
+  --collision-start $((EPOCHS1 * 2 / 3)) --remesh-copies "${REMESH:-0}" \
+  "${MIRROR_FLAG[@]}"
 EPOCHS2=${STAGE2_EPOCHS:-40}
 if [ "$EPOCHS2" -gt 0 ]; then
   "${TRAIN[@]}" --out "$OUT/stage2" --resolution both --epochs "$EPOCHS2" --lr 3e-4 --collision-start 0 \

@@ -511,6 +511,7 @@ def cmd_train(args: argparse.Namespace) -> int:
         "model": init.kind if init is not None else args.model,
         "device": args.device,
         "remesh_copies": args.remesh_copies,
+        "mirror": True if args.mirror else None,
     }
     losses = {
         "col": args.collision_weight,
@@ -538,6 +539,10 @@ def cmd_train(args: argparse.Namespace) -> int:
         originals = len(train)
         train = remesh_augmented(train, full, cfg.remesh_copies, seed=cfg.seed)
         print(f"remeshing: {len(train) - originals} variants of {len(full)} full-resolution training samples")
+    if cfg.mirror:  # every training sample (variants included) mirrored left to right as well
+        from garsim.train.augment import MirrorAugmented
+
+        train = MirrorAugmented(train)
     print(f"training on {len(train)} samples, validating on {len(val)} ({args.resolution} resolution)")
     model_config = init.config if init is not None else GarSimConfig(**({"head": args.head} if args.head else {}))
     history = Trainer(model_config, cfg, train, val or None, init=init).fit()
@@ -860,6 +865,12 @@ def build_parser() -> argparse.ArgumentParser:
         ),
         *trainer,
         "remesh_copies",
+    )
+    p.add_argument(
+        "--mirror",
+        action="store_true",
+        help="also train on every training sample mirrored left to right (exact new ground truth: the physics is "
+        "symmetric; validation is never augmented)",
     )
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=cmd_train)

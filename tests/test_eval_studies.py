@@ -26,7 +26,7 @@ from garsim.train.trainer import TrainConfig
 FIXTURE = Path(__file__).parent / "fixtures" / "dataset_v2"
 SMALL = GarSimConfig(latent=32, edge_latent=16, mlp_hidden=32, num_steps=2)
 BASELINES = {"prior", "nearest", "ground truth"}
-TEST_FAMILIES = {"all", "skirt", "top", "longsleeve", "trousers", "dress"}
+TEST_FAMILIES = {"all", "skirt", "top", "tshirt", "longsleeve", "trousers", "dress"}
 
 
 def _study(folder: Path, **train) -> StudyConfig:
@@ -54,7 +54,7 @@ def test_heads_and_message_passing_steps(tmp_path):
         == 0
     )
     table = family_table(out["results"])
-    assert table.splitlines()[0] == "| euclidean_mm | all | dress | longsleeve | skirt | top | trousers |"
+    assert table.splitlines()[0] == "| euclidean_mm | all | dress | longsleeve | skirt | top | trousers | tshirt |"
     assert "| position, L=2 | " in table
     json.dumps(out)  # the result is JSON-able as it is
 

@@ -1,5 +1,5 @@
-"""The committed fixture: real settled Newton samples (low resolution, last settled state) exported from the v2
-dataset by `examples/make_fixture.py --data ~/garsim-data/v2` (one per family and construction, every canonical
+"""The committed fixture: real settled Newton samples (low resolution, last settled state) exported from the 40 x 4
+v4 datasets by `examples/make_fixture.py --data ~/garsim-data/v4test --train-data ~/garsim-data/v4` (one per family and construction, every canonical
 pose, physical fabric values, one paired-fabric group)."""
 
 from pathlib import Path
@@ -47,5 +47,5 @@ def test_fixture_holds_a_paired_group_ordered_like_real_fabrics():
 def test_info_reads_a_store_with_only_the_low_level():
     """The fixture keeps the decimated level only: ``data info`` reports its vertex range from it."""
     info = DatasetStore(FIXTURE).info()
-    assert info["settled_samples"] == 15
+    assert info["settled_samples"] == 18
     assert 100 < info["vertices"]["min"] <= info["vertices"]["max"] < 1000

@@ -137,3 +137,104 @@ def test_cli_flag_defaults_to_train_config_and_refuses_negative(tmp_path, capsys
     assert "--remesh-copies" in text and f"(default: {TrainConfig().remesh_copies})" in text.split("--remesh-copies")[2]
     code = main(["train", "--data", str(tmp_path), "--out", str(tmp_path / "run"), "--remesh-copies", "-1"])
     assert code == 2 and "--remesh-copies must be >= 0" in capsys.readouterr().err
+
+
+def _normals(v: np.ndarray, f: np.ndarray) -> np.ndarray:
+    v = v.astype(np.float64)
+    return np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]])
+
+
+def test_mirror_reflects_every_position_across_the_lateral_plane_and_keeps_normals_outward(full):
+    from garsim.model.inputs import body_yaw_frame
+    from garsim.train.augment import mirror_sample
+
+    src = full[0]
+    m = mirror_sample(src)
+    lateral = body_yaw_frame(src.body_canonical)[0]
+    centre = src.body_canonical.astype(np.float64).mean(axis=0)
+    for name in ("body_canonical", "body_target", "garment", "prior", "target"):
+        a, b = getattr(src, name).astype(np.float64), getattr(m, name).astype(np.float64)
+        # by hand: the lateral coordinate about the centroid changes sign, the other two stay
+        np.testing.assert_allclose((b - centre) @ lateral, -((a - centre) @ lateral), atol=1e-5)
+        np.testing.assert_allclose(
+            b - ((b - centre) @ lateral)[:, None] * lateral, a - ((a - centre) @ lateral)[:, None] * lateral, atol=1e-5
+        )
+        assert getattr(m, name).dtype == getattr(src, name).dtype
+    # reversed winding: every face normal is the mirror image of the original one (outward stays outward)
+    for (va, fa), (vb, fb) in (
+        ((src.garment, src.garment_faces), (m.garment, m.garment_faces)),
+        ((src.body_canonical, src.body_faces), (m.body_canonical, m.body_faces)),
+    ):
+        na, nb = _normals(va, fa), _normals(vb, fb)
+        np.testing.assert_allclose(nb, na - 2.0 * (na @ lateral)[:, None] * lateral, atol=1e-6)
+    twice = mirror_sample(m)
+    np.testing.assert_allclose(twice.garment, src.garment, atol=1e-5)
+    np.testing.assert_array_equal(twice.garment_faces, src.garment_faces)
+    np.testing.assert_array_equal(m.pinned, src.pinned)
+    assert m.meta["name"] == "a@0~mirror" and m.meta["mirror"] and "mirror" not in src.meta
+
+
+def test_a_mirrored_anny_sample_is_an_anny_body_and_a_geometric_prior_follows_the_mirror():
+    """On a real sample: the mirrored canonical body is the same Anny body (its shape is left-right symmetric to
+    under a millimetre), and a prior that depends on geometry alone (the rig-free one), computed on the mirrored
+    meshes, is the mirror of the original's. (The stored prior is Anny's LBS, whose skinning weights follow vertex
+    indices: it is reflected with the scene, the prior of the mirrored pose on a symmetric rig.)"""
+    from pathlib import Path
+
+    from scipy.spatial import cKDTree
+
+    from garsim.bodies.prior import rigfree_prior
+    from garsim.data.store import DatasetStore
+    from garsim.train.augment import mirror_sample
+
+    s = DatasetStore(Path(__file__).parent / "fixtures" / "dataset_v2").samples("test", resolution="low")[0]
+    m = mirror_sample(s)
+    gap, _ = cKDTree(s.body_canonical).query(m.body_canonical)
+    assert 1000 * gap.max() < 1.0  # mm: measured 0.22
+    s.prior = rigfree_prior(s.garment, s.body_canonical, s.body_target, s.body_faces)
+    again = rigfree_prior(m.garment, m.body_canonical, m.body_target, m.body_faces)
+    assert 1000 * np.abs(again - mirror_sample(s).prior).max() < 0.01  # mm
+    assert 1000 * np.abs(m.target - s.target).max() > 10.0  # and the mirror is another scene
+
+
+def test_mirror_augmented_doubles_the_set_and_trains(full):
+    from garsim.model.garsim import GarSimModel
+    from garsim.train.augment import MirrorAugmented
+
+    aug = MirrorAugmented(remesh_augmented(full, full, copies=1, seed=1))
+    assert len(aug) == 8 and aug[1] is full[1] and aug[-1].meta["name"] == "b@0~remesh0~mirror"
+    with pytest.raises(IndexError):
+        aug[8]
+    data = GraphDataset(aug, SMALL, with_collision=True, make_graph=build_graph)
+    batch = collate([data[i] for i in range(len(data))])
+    torch.manual_seed(0)
+    model = GarSimModel(SMALL)
+    opt = torch.optim.Adam(model.parameters(), lr=1e-3)
+    losses = []
+    for _ in range(15):
+        opt.zero_grad()
+        loss, _ = garsim_loss(model(batch), batch, LossWeights(), use_collision=True)
+        loss.backward()
+        opt.step()
+        losses.append(loss.item())
+    assert all(np.isfinite(losses)) and losses[-1] < 0.9 * losses[0]
+    assert TrainConfig().mirror is False and TrainConfig.from_dict({"mirror": True}).mirror
+
+
+def test_cli_mirror_trains_on_the_mirrored_set_too(tmp_path, capsys):
+    """`garsim train --mirror` doubles the training set (the fixture's one skirt job and its rest sample) and
+    records the choice in the run's config."""
+    import json
+    from pathlib import Path
+
+    from garsim.cli import main
+
+    fixture = str(Path(__file__).parent / "fixtures" / "dataset_v2")
+    run = tmp_path / "run"
+    args = ["train", "--data", fixture, "--out", str(run), "--families", "skirt", "--epochs", "1", "--quiet"]
+    assert main(args) == 0
+    plain = int(capsys.readouterr().out.split("training on ")[1].split()[0])
+    assert main([*args[:4], str(tmp_path / "mirrored"), *args[5:], "--mirror"]) == 0
+    assert int(capsys.readouterr().out.split("training on ")[1].split()[0]) == 2 * plain
+    assert json.loads((tmp_path / "mirrored" / "train_config.json").read_text())["mirror"] is True
+    assert json.loads((run / "train_config.json").read_text())["mirror"] is False

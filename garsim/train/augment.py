@@ -1,4 +1,5 @@
-"""Training augmentation: random garment remeshing (issue 9, "random garment remeshing and resolution").
+"""Training augmentations: random garment remeshing (issue 9, "random garment remeshing and resolution") and
+left-right mirroring.
 
 The simulator samples every garment on one mesh per instance and the store keeps two resolutions of it (``full``
 and the ~4x decimated ``low``), so a network trained on them sees only two mesh densities per garment. A remeshed
@@ -12,6 +13,11 @@ the training list, and the same run rebuilds the same variants. ``RemeshAugmente
 indexed and keeps none: ``GraphDataset`` caches each sample's graph (the one copy a run holds), so a variant is built
 once per run. Validation is never augmented (only training samples
 are wrapped, by ``garsim train --remesh-copies N``).
+
+Mirroring (``garsim train --mirror``): every training sample (remeshed variants included) also enters mirrored
+left to right (``mirror_sample``). The network is equivariant to turns about the vertical by construction, but not
+to reflections, and the simulator is symmetric under them: a mirrored sample is exact new ground truth (the
+left and right of the pose swapped), at no simulation cost.
 """
 
 from __future__ import annotations
@@ -26,6 +32,7 @@ import numpy as np
 from garsim.data.sample import Sample
 from garsim.garments.garment import Garment
 from garsim.garments.remesh import BarycentricMap, decimate, transfer_barycentric
+from garsim.model.inputs import body_yaw_frame
 
 MAX_FRACTION = 0.7
 """Largest variant as a share of the full resolution's vertices (near 1 a variant is the full mesh again)."""
@@ -85,7 +92,27 @@ def remesh_variant(
     return out
 
 
-class RemeshAugmented(Sequence[Sample]):
+class _LazySamples(Sequence[Sample]):
+    """A sequence of samples built when indexed (``_item``), with list-like indexing and bounds."""
+
+    def _item(self, i: int) -> Sample:
+        raise NotImplementedError
+
+    @overload
+    def __getitem__(self, i: int) -> Sample: ...
+    @overload
+    def __getitem__(self, i: slice) -> list[Sample]: ...
+    def __getitem__(self, i):  # type: ignore[override]
+        if isinstance(i, slice):
+            return [self[j] for j in range(*i.indices(len(self)))]
+        if i < 0:
+            i += len(self)
+        if not 0 <= i < len(self):
+            raise IndexError(f"index {i} out of range for {len(self)} samples")
+        return self._item(i)
+
+
+class RemeshAugmented(_LazySamples):
     """The training samples followed by ``copies`` remeshed variants of each source, built when indexed (not kept:
     ``GraphDataset`` caches their graphs).
 
@@ -116,17 +143,7 @@ class RemeshAugmented(Sequence[Sample]):
     def __len__(self) -> int:
         return len(self.originals) + len(self.sources) * self.copies
 
-    @overload
-    def __getitem__(self, i: int) -> Sample: ...
-    @overload
-    def __getitem__(self, i: slice) -> list[Sample]: ...
-    def __getitem__(self, i):  # type: ignore[override]
-        if isinstance(i, slice):
-            return [self[j] for j in range(*i.indices(len(self)))]
-        if i < 0:
-            i += len(self)
-        if not 0 <= i < len(self):
-            raise IndexError(f"index {i} out of range for {len(self)} samples")
+    def _item(self, i: int) -> Sample:
         if i < len(self.originals):
             return self.originals[i]
         s, v = divmod(i - len(self.originals), self.copies)
@@ -151,3 +168,58 @@ def remesh_augmented(
         m = coarse.get(str(s.meta.get("name", "")))
         mins.append(m if m is not None and m < len(s.garment) else None)
     return RemeshAugmented(originals, list(full), copies, seed, mins, max_fraction)
+
+
+def mirror_sample(sample: Sample) -> Sample:
+    """``sample`` reflected left-to-right: every position (bodies, template, prior, truth) mirrored in the vertical
+    plane through the canonical body's centroid across its lateral axis (``model.inputs.body_yaw_frame``'s X), and
+    every face's winding reversed so that normals stay outward. Cloth physics (gravity, stretch, bending, contact)
+    is symmetric under this reflection, so the mirrored ground truth is the simulator's answer for the mirrored
+    scene: an exact second sample, with the left and right of every pose swapped."""
+    centre = np.asarray(sample.body_canonical, dtype=np.float64).mean(axis=0)
+    lateral = body_yaw_frame(sample.body_canonical)[0]  # unit X axis of the body frame, horizontal
+
+    def reflect(points: np.ndarray | None) -> np.ndarray | None:
+        if points is None:
+            return None
+        p = np.asarray(points, dtype=np.float64)
+        return (p - 2.0 * ((p - centre) @ lateral)[:, None] * lateral).astype(points.dtype)
+
+    name = str(sample.meta.get("name", ""))
+    return dataclasses.replace(
+        sample,
+        body_canonical=reflect(sample.body_canonical),
+        body_target=reflect(sample.body_target),
+        body_faces=_reversed_faces(sample.body_faces),
+        garment=reflect(sample.garment),
+        garment_faces=np.ascontiguousarray(sample.garment_faces[:, ::-1]),
+        prior=reflect(sample.prior),
+        target=reflect(sample.target),
+        meta={**sample.meta, "name": f"{name}~mirror", "mirror": True},
+    )
+
+
+_REVERSED: dict[int, tuple[np.ndarray, np.ndarray]] = {}
+
+
+def _reversed_faces(faces: np.ndarray) -> np.ndarray:
+    """``faces`` with reversed winding; one copy per faces array (the samples of one store share the body's)."""
+    hit = _REVERSED.get(id(faces))
+    if hit is None or hit[0] is not faces:
+        hit = (faces, np.ascontiguousarray(faces[:, ::-1]))
+        _REVERSED[id(faces)] = hit
+    return hit[1]
+
+
+class MirrorAugmented(_LazySamples):
+    """``samples`` followed by the mirror image of each (``mirror_sample``), built when indexed."""
+
+    def __init__(self, samples: Sequence[Sample]) -> None:
+        self.samples = samples
+
+    def __len__(self) -> int:
+        return 2 * len(self.samples)
+
+    def _item(self, i: int) -> Sample:
+        n = len(self.samples)
+        return self.samples[i] if i < n else mirror_sample(self.samples[i - n])

@@ -83,6 +83,7 @@ class TrainConfig:
     device: str = "cpu"  # "cpu" (the documented path), "cuda", "cuda:N", or "auto" (CUDA when present)
     model: str = "garsim"  # a key of baselines.MODELS: "garsim", or "deepsd" (the DeePSD-style baseline)
     remesh_copies: int = 0  # remeshed variants per training sample (garsim.train.augment; `garsim train` applies it)
+    mirror: bool = False  # also train on every sample mirrored left to right (garsim.train.augment.mirror_sample)
 
     def to_dict(self) -> dict[str, Any]:
         """Plain JSON dict."""
