@@ -1,6 +1,7 @@
 """The committed fixture: real settled Newton samples (low resolution, last settled state) exported from the 40 x 4
-v4 datasets by `examples/make_fixture.py --data ~/garsim-data/v4test --train-data ~/garsim-data/v4` (one per family and construction, every canonical
-pose, physical fabric values, one paired-fabric group)."""
+v4 datasets by `examples/make_fixture.py --data ~/garsim-data/v4test --train-data ~/garsim-data/v4` (one test record
+per family and construction, every canonical pose, physical fabric values, one paired-fabric group; four training
+records)."""
 
 from pathlib import Path
 
