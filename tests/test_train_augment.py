@@ -1,5 +1,7 @@
 """Remeshing augmentation (garsim.train.augment): fewer vertices, the same surfaces, deterministic, trainable."""
 
+import dataclasses
+
 import numpy as np
 import pytest
 import torch
@@ -173,6 +175,9 @@ def test_mirror_reflects_every_position_across_the_lateral_plane_and_keeps_norma
     ):
         na, nb = _normals(va, fa), _normals(vb, fb)
         np.testing.assert_allclose(nb, na - 2.0 * (na @ lateral)[:, None] * lateral, atol=1e-6)
+    # one reversed copy per body topology, not per faces array (the store loads a new array for every sample)
+    twin = dataclasses.replace(src, body_faces=src.body_faces.copy())
+    assert mirror_sample(twin).body_faces is m.body_faces
     twice = mirror_sample(m)
     np.testing.assert_allclose(twice.garment, src.garment, atol=1e-5)
     np.testing.assert_array_equal(twice.garment_faces, src.garment_faces)

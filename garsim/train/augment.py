@@ -30,6 +30,7 @@ from typing import overload
 import numpy as np
 
 from garsim.data.sample import Sample
+from garsim.data.store import faces_key
 from garsim.garments.garment import Garment
 from garsim.garments.remesh import BarycentricMap, decimate, transfer_barycentric
 from garsim.model.inputs import body_yaw_frame
@@ -199,16 +200,17 @@ def mirror_sample(sample: Sample) -> Sample:
     )
 
 
-_REVERSED: dict[int, tuple[np.ndarray, np.ndarray]] = {}
+_REVERSED: dict[str, np.ndarray] = {}
 
 
 def _reversed_faces(faces: np.ndarray) -> np.ndarray:
-    """``faces`` with reversed winding; one copy per faces array (the samples of one store share the body's)."""
-    hit = _REVERSED.get(id(faces))
-    if hit is None or hit[0] is not faces:
-        hit = (faces, np.ascontiguousarray(faces[:, ::-1]))
-        _REVERSED[id(faces)] = hit
-    return hit[1]
+    """``faces`` with reversed winding; one copy per body topology (keyed by content: the store loads a new faces
+    array for every sample, and an identity key would keep one copy per sample alive)."""
+    key = faces_key(faces)
+    hit = _REVERSED.get(key)
+    if hit is None:
+        hit = _REVERSED[key] = np.ascontiguousarray(faces[:, ::-1])
+    return hit
 
 
 class MirrorAugmented(_LazySamples):
