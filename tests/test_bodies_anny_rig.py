@@ -49,3 +49,34 @@ def test_mesh_pair_prior_needs_no_torch():
         "sys.exit(any(m in sys.modules for m in ('torch', 'anny', 'warp')))\n"
     )
     assert subprocess.run([sys.executable, "-c", code], timeout=120).returncode == 0
+
+
+def test_same_quads_accepts_the_other_diagonal_and_nothing_else():
+    from garsim.bodies.anny_rig import same_quads
+
+    # a strip of three quads (0 1 5 4), (1 2 6 5), (2 3 7 6), each split on its 0-2 diagonal
+    ref = np.array([[0, 1, 5], [0, 5, 4], [1, 2, 6], [1, 6, 5], [2, 3, 7], [2, 7, 6]] * 40)
+    assert same_quads(ref.copy(), ref)
+    flipped = ref.copy()
+    flipped[2:4] = [[1, 2, 5], [2, 6, 5]]  # the second quad split on its other diagonal: same four vertices
+    assert same_quads(flipped, ref) and same_quads(ref, flipped)
+    wrong = flipped.copy()
+    wrong[3] = [2, 6, 7]  # a vertex the quad does not have
+    assert not same_quads(wrong, ref)
+    lone = ref.copy()
+    lone[2] = [1, 2, 5]  # one triangle changed, not a quad's pair
+    assert not same_quads(lone, ref)
+    many = ref.copy()
+    many[0:4] = [[0, 1, 4], [1, 5, 4], [1, 2, 5], [2, 6, 5]]  # 4 of 240 rows flipped: over the 1% share
+    assert not same_quads(many, ref)
+    assert not same_quads(ref[:-1], ref)
+
+
+def test_the_committed_fixture_body_matches_this_machines_anny_rig():
+    """The fixture's body was triangulated on another machine (Anny's diagonal choice is float-dependent)."""
+    from pathlib import Path
+
+    from garsim.bodies.anny_rig import ANNY_VERTICES, match_anny_rig
+
+    path = next((Path(__file__).parent / "fixtures" / "dataset_v2" / "body_faces").glob("*.npy"))
+    assert match_anny_rig(ANNY_VERTICES, np.load(path)) is not None
