@@ -30,9 +30,9 @@ from typing import overload
 import numpy as np
 
 from garsim.data.sample import Sample
-from garsim.data.store import faces_key
 from garsim.garments.garment import Garment
 from garsim.garments.remesh import BarycentricMap, decimate, transfer_barycentric
+from garsim.geometry.cache import ContentCache, content_key
 from garsim.model.inputs import body_yaw_frame
 
 MAX_FRACTION = 0.7
@@ -200,17 +200,13 @@ def mirror_sample(sample: Sample) -> Sample:
     )
 
 
-_REVERSED: dict[str, np.ndarray] = {}
+_REVERSED = ContentCache(4, scope="body")
+"""Reversed body faces, one copy per topology (keyed by content: the store loads a new faces array per sample)."""
 
 
 def _reversed_faces(faces: np.ndarray) -> np.ndarray:
-    """``faces`` with reversed winding; one copy per body topology (keyed by content: the store loads a new faces
-    array for every sample, and an identity key would keep one copy per sample alive)."""
-    key = faces_key(faces)
-    hit = _REVERSED.get(key)
-    if hit is None:
-        hit = _REVERSED[key] = np.ascontiguousarray(faces[:, ::-1])
-    return hit
+    """``faces`` with reversed winding, shared by every sample of one body topology."""
+    return _REVERSED.get(content_key(faces), lambda: np.ascontiguousarray(faces[:, ::-1]))
 
 
 class MirrorAugmented(_LazySamples):
