@@ -42,4 +42,7 @@ results: $(STAMP)
 	  $(VENV)/bin/python examples/external_check.py --prior-only --refine --json docs/external_prior_refine.json; fi
 	$(VENV)/bin/garsim bench --model $(MODEL) --sizes 600 2400 10000 40000 --out docs/bench.json
 	$(VENV)/bin/python examples/make_report.py --run $(patsubst %/log.csv,%,$(wildcard $(RUN)/log.csv)) --model $(MODEL) --data $(DATA) \
-	  --results docs/results.json --external $(wildcard docs/external_default.json docs/external_raw.json docs/external_prior_refine.json)
+	  --results docs/results.json --bench docs/bench.json \
+	  $$([ -f docs/external_default.json ] && echo --external-default docs/external_default.json) \
+	  $$([ -f docs/external_raw.json ] && echo --external-raw docs/external_raw.json) \
+	  $$([ -f docs/external_prior_refine.json ] && echo --external docs/external_prior_refine.json)

@@ -1,9 +1,11 @@
-"""Write docs/results.md (and its figures) from a trained model's measured results: the training curve, the
-test / ood tables of `garsim eval --refine --out`, the paired-fabric agreement, the external check (raw network
-and API defaults, from check.py --json) and error maps of test samples (prior, prediction, ground truth).
+"""Write docs/results.md (and its figures) from a trained model's measured results: the model issue's goals, met
+or missed (``garsim.eval.goals``), the training curve, the test / ood tables of `garsim eval --refine --out`, the
+paired-fabric agreement, the external check (API defaults and raw network, from check.py --json), the speed bench,
+error maps of test samples (prior, prediction, ground truth) and an index of the studies in docs/studies/.
 
 Run: .venv/bin/python examples/make_report.py --run ~/garsim-runs/v1 --data ~/garsim-data/v3 \
-    --results docs/results.json --external docs/external_default.json docs/external_raw.json
+    --results docs/results.json --external-default docs/external_default.json \
+    --external-raw docs/external_raw.json --bench docs/bench.json
 """
 
 from __future__ import annotations
@@ -17,6 +19,7 @@ import numpy as np
 from garsim.api import GarSim
 from garsim.data.store import DatasetStore
 from garsim.eval.experiments import format_table
+from garsim.eval.goals import format_goals, model_goals, speed_goals
 from garsim.eval.plots import plot_training_curve
 from garsim.geometry.render import render_grid
 
@@ -39,6 +42,20 @@ def _external_table(paths: list[Path]) -> str:
     return "\n".join(lines)
 
 
+def _load(path: str | None) -> dict | None:
+    return json.loads(Path(path).read_text()) if path else None
+
+
+def studies_index(folder: Path) -> str:
+    """One line per study report in ``folder``: its title (first heading) and file, README first."""
+    files = sorted(folder.glob("*.md"), key=lambda f: (f.name != "README.md", f.name))
+    lines = []
+    for f in files:
+        title = next((ln.lstrip("# ").strip() for ln in f.read_text().splitlines() if ln.startswith("#")), f.stem)
+        lines.append(f"- [{title}]({folder.name}/{f.name})")
+    return "\n".join(lines)
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument(
@@ -47,7 +64,10 @@ def main() -> None:
     parser.add_argument("--model", default=None, help="model folder (default: the shipped model)")
     parser.add_argument("--data", required=True)
     parser.add_argument("--results", required=True, help="JSON written by `garsim eval --refine --out`")
-    parser.add_argument("--external", nargs="*", default=[], help="JSON files written by check.py --json")
+    parser.add_argument("--external-default", help="check.py --json with the API defaults")
+    parser.add_argument("--external-raw", help="examples/external_check.py --raw --json (the raw network)")
+    parser.add_argument("--external", nargs="*", default=[], help="further check.py --json files for the table")
+    parser.add_argument("--bench", help="JSON written by `garsim bench --out`")
     parser.add_argument("--docs", default="docs")
     parser.add_argument("--samples", type=int, default=6)
     args = parser.parse_args()
@@ -82,6 +102,8 @@ def main() -> None:
     parts = [
         f"# GarSim results\n\nModel: `{results['model']}`; data: `{args.data}` ({results['resolution']} resolution).",
         f"Training curve: `{curve.name}`. Error maps of random test samples: `{maps.name}`.",
+        "## Goals of the model issue (raw network unless stated)\n"
+        + format_goals(model_goals(results, _load(args.external_default), _load(args.external_raw), _load(args.bench))),
     ]
     for split in ("test", "ood"):
         if split in results:
@@ -96,11 +118,18 @@ def main() -> None:
             f"{fab['ordering_agreement']} over {fab['pairs_over_gap']} neighbouring pairs whose simulated values "
             f"differ by more than 2 mm / 2 deg; predicted / simulated spread {fab['spread_ratio']}."
         )
-    if args.external:
+    external = [Path(p) for p in (args.external_default, args.external_raw, *args.external) if p]
+    if external:
+        parts.append("## External check set (`../shared/external-eval/check.py`)\n" + _external_table(external))
+    if args.bench:
         parts.append(
-            "## External check set (`../shared/external-eval/check.py`)\n"
-            + _external_table([Path(p) for p in args.external])
+            f"## Speed\n`garsim bench --out {args.bench}` (table and plot: `bench.md`, `bench.png`): "
+            + ", ".join(f"{g.name} {g.value:.1f} ms" for g in speed_goals(_load(args.bench)) if g.value is not None)
+            + "."
         )
+    studies_dir = docs / "studies"
+    if studies_dir.is_dir():
+        parts.append("## Studies (each headed by the command that made it)\n" + studies_index(studies_dir))
     out = docs / "results.md"
     out.write_text("\n\n".join(parts) + "\n")
     print(out)

@@ -1,0 +1,134 @@
+"""The model issue's acceptance bounds, checked against measured results: which goals a model meets and which it
+misses, stated plainly in the results report.
+
+Inputs are the JSON files the project already writes: ``garsim eval --refine --out`` (test / ood tables and the
+paired-fabric agreement), the external check's ``--json`` (API defaults and ``--raw``), and ``garsim bench --out``.
+A goal whose input is missing is reported as not measured, never as met.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass
+from typing import Any
+
+Results = Mapping[str, Any]
+
+
+@dataclass(frozen=True)
+class Goal:
+    """One acceptance bound and its measured value (``None``: not measured)."""
+
+    name: str
+    bound: float
+    value: float | None
+    at_least: bool = False  # the bound is a minimum (agreement, spread), not a maximum
+    unit: str = "x"
+
+    @property
+    def met(self) -> bool | None:
+        if self.value is None:
+            return None
+        return self.value >= self.bound if self.at_least else self.value <= self.bound
+
+
+def _ratio(table: Results, method: str, family: str) -> float | None:
+    """``method``'s mean Euclidean error over the prior's on ``family`` of an eval table."""
+    try:
+        pred, prior = table[method][family]["euclidean_mm"], table["prior"][family]["euclidean_mm"]
+    except KeyError:
+        return None
+    return pred / prior if prior > 0 else None
+
+
+def _worst(values: Mapping[str, float | None]) -> tuple[str, float | None]:
+    """The key with the largest value (and it), ignoring unmeasured ones."""
+    known = {k: v for k, v in values.items() if v is not None}
+    if not known:
+        return "-", None
+    key = max(known, key=known.__getitem__)
+    return key, known[key]
+
+
+def split_goals(results: Results, split: str, overall: float, family: float | None) -> list[Goal]:
+    """Accuracy of the raw network on one split of ``garsim eval`` (ratio to the prior), and its collisions."""
+    table = results.get(split)
+    if table is None:
+        return [Goal(f"{split} split: raw network / prior, all families", overall, None)]
+    goals = [Goal(f"{split} split: raw network / prior, all families", overall, _ratio(table, "garsim", "all"))]
+    if family is not None:
+        families = {f: _ratio(table, "garsim", f) for f in table.get("prior", {}) if f != "all"}
+        worst, value = _worst(families)
+        goals.append(Goal(f"{split} split: worst family ({worst})", family, value))
+    raw = table.get("garsim", {}).get("all", {})
+    goals += [
+        Goal(f"{split} split: raw network, vertices inside the body", 1.5, raw.get("inside_pct"), unit="%"),
+        Goal(f"{split} split: raw network, edges through the body", 1.0, raw.get("edge_crossing_pct"), unit="%"),
+    ]
+    return goals
+
+
+def external_goals(defaults: Results | None, raw: Results | None) -> list[Goal]:
+    """The external check set: API defaults overall and per garment type, and the raw network's collisions."""
+    summary = (defaults or {}).get("summary", {})
+    types = {k: s.get("ratio") for k, s in summary.items() if k != "all"}
+    worst, value = _worst(types)
+    raw_all = (raw or {}).get("summary", {}).get("all", {}).get("pred", {})
+    return [
+        Goal("external set: API defaults / prior, all", 0.6, summary.get("all", {}).get("ratio")),
+        Goal(f"external set: worst garment type ({worst})", 0.85, value),
+        Goal("external set: raw network, vertices inside the body", 1.5, raw_all.get("inside_pct"), unit="%"),
+        Goal("external set: raw network, edges through the body", 1.0, raw_all.get("edge_crossing_pct"), unit="%"),
+    ]
+
+
+def fabric_goals(results: Results) -> list[Goal]:
+    """Paired fabric groups of the test split: ordering agreement and predicted / simulated spread."""
+    fab = results.get("paired_fabrics") or {}
+    return [
+        Goal("paired fabrics: ordering agreement", 0.9, fab.get("ordering_agreement"), at_least=True, unit=""),
+        Goal("paired fabrics: predicted / simulated spread", 0.6, fab.get("spread_ratio"), at_least=True, unit=""),
+    ]
+
+
+def speed_goals(bench: Results | None) -> list[Goal]:
+    """``garsim bench``: the network forward at 600 and 2,400 vertices and a new-pose drape at 600 (one thread)."""
+    rows = (bench or {}).get("garsim", {})
+
+    def ms(size: str, key: str) -> float | None:
+        return rows.get(size, {}).get(key)
+
+    return [
+        Goal("forward, ~600 vertices", 12.0, ms("600", "forward_cpu_ms"), unit=" ms"),
+        Goal("forward, ~2,400 vertices", 35.0, ms("2400", "forward_cpu_ms"), unit=" ms"),
+        Goal("new-pose drape, ~600 vertices", 25.0, ms("600", "api_new_pose_cpu_ms"), unit=" ms"),
+    ]
+
+
+def model_goals(
+    results: Results,
+    external_default: Results | None = None,
+    external_raw: Results | None = None,
+    bench: Results | None = None,
+) -> list[Goal]:
+    """Every measurable bound of the model issue's acceptance list, in its order."""
+    return [
+        *split_goals(results, "test", overall=0.4, family=0.6),
+        *split_goals(results, "ood", overall=0.6, family=None),
+        *external_goals(external_default, external_raw),
+        *fabric_goals(results),
+        *speed_goals(bench),
+    ]
+
+
+def format_goals(goals: list[Goal]) -> str:
+    """A markdown table: goal, bound, measured, met / missed / not measured."""
+    lines = ["| goal | bound | measured | |", "|---|---|---|---|"]
+    for g in goals:
+        bound = f"{'>=' if g.at_least else '<='} {g.bound:g}{g.unit}"
+        value = "-" if g.value is None else f"{g.value:.3g}{g.unit}"
+        verdict = {None: "not measured", True: "met", False: "**missed**"}[g.met]
+        lines.append(f"| {g.name} | {bound} | {value} | {verdict} |")
+    met = sum(g.met is True for g in goals)
+    missed = sum(g.met is False for g in goals)
+    return "\n".join(lines) + f"\n\n{met} met, {missed} missed, {len(goals) - met - missed} not measured."

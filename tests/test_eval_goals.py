@@ -1,0 +1,116 @@
+"""garsim.eval.goals: the model issue's bounds checked against hand-made results, and the report that states them."""
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from garsim.eval.goals import Goal, format_goals, model_goals
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def _row(mm: float, inside: float = 0.0, through: float = 0.0) -> dict:
+    return {"euclidean_mm": mm, "inside_pct": inside, "edge_crossing_pct": through}
+
+
+def _results() -> dict:
+    """A test split where the network is at 0.3x the prior overall, 0.5x on skirts and 0.75x on tops."""
+    return {
+        "test": {
+            "garsim": {"all": _row(12.0, inside=1.0, through=2.0), "skirt": _row(20.0), "top": _row(15.0)},
+            "prior": {"all": _row(40.0), "skirt": _row(40.0), "top": _row(20.0)},
+        },
+        "paired_fabrics": {"ordering_agreement": 0.95, "spread_ratio": 0.1},
+    }
+
+
+def _external(ratios: dict[str, float], inside: float = 0.0, through: float = 0.0) -> dict:
+    summary = {k: {"ratio": r, "pred": {"inside_pct": inside, "edge_crossing_pct": through}} for k, r in ratios.items()}
+    return {"summary": summary}
+
+
+def _by_name(goals: list[Goal]) -> dict[str, Goal]:
+    return {g.name: g for g in goals}
+
+
+def test_goals_from_hand_made_results():
+    bench = {"garsim": {"600": {"forward_cpu_ms": 5.0, "api_new_pose_cpu_ms": 30.0}, "2400": {"forward_cpu_ms": 17}}}
+    goals = _by_name(
+        model_goals(
+            _results(),
+            _external({"skirt": 0.7, "tshirt": 1.2, "all": 0.8}),
+            _external({"all": 0.9}, inside=2.0, through=0.5),
+            bench,
+        )
+    )
+    overall = goals["test split: raw network / prior, all families"]
+    assert overall.value == pytest.approx(0.3) and overall.met
+    worst = goals["test split: worst family (top)"]  # 15 / 20 beats skirt's 20 / 40 as the worst
+    assert worst.value == pytest.approx(0.75) and worst.met is False
+    assert goals["test split: raw network, vertices inside the body"].met  # 1.0 <= 1.5
+    assert goals["test split: raw network, edges through the body"].met is False  # 2.0 > 1.0
+    assert goals["external set: API defaults / prior, all"].value == 0.8
+    assert goals["external set: worst garment type (tshirt)"].met is False
+    assert goals["external set: raw network, vertices inside the body"].met is False  # the raw file, not defaults
+    assert goals["external set: raw network, edges through the body"].met
+    assert goals["paired fabrics: ordering agreement"].met  # a minimum: 0.95 >= 0.9
+    assert goals["paired fabrics: predicted / simulated spread"].met is False  # 0.1 < 0.6
+    assert goals["forward, ~600 vertices"].met and goals["forward, ~2,400 vertices"].met
+    assert goals["new-pose drape, ~600 vertices"].met is False  # 30 > 25 ms
+    assert goals["ood split: raw network / prior, all families"].met is None  # no ood table: not measured
+
+
+def test_missing_inputs_are_not_measured_never_met():
+    goals = model_goals({})
+    assert goals and all(g.value is None and g.met is None for g in goals)
+    table = format_goals(goals)
+    assert "| met |" not in table and table.endswith(f"0 met, 0 missed, {len(goals)} not measured.")
+
+
+def test_format_goals_marks_each_verdict():
+    table = format_goals(
+        [Goal("a", 0.4, 0.3), Goal("b", 0.6, 0.7), Goal("c", 0.9, 0.95, at_least=True, unit=""), Goal("d", 1, None)]
+    )
+    lines = table.splitlines()
+    assert lines[2] == "| a | <= 0.4x | 0.3x | met |"
+    assert lines[3] == "| b | <= 0.6x | 0.7x | **missed** |"
+    assert lines[4] == "| c | >= 0.9 | 0.95 | met |"
+    assert lines[5] == "| d | <= 1x | - | not measured |"
+    assert lines[-1] == "2 met, 1 missed, 1 not measured."
+
+
+def test_studies_index_lists_every_report_readme_first(tmp_path):
+    sys.path.insert(0, str(ROOT / "examples"))
+    try:
+        from make_report import studies_index
+    finally:
+        sys.path.pop(0)
+    folder = tmp_path / "studies"
+    folder.mkdir()
+    (folder / "b.md").write_text("intro\n# Second study\ntext\n")
+    (folder / "README.md").write_text("# Index\n")
+    (folder / "a.md").write_text("no heading\n")
+    assert studies_index(folder).splitlines() == [
+        "- [Index](studies/README.md)",
+        "- [a](studies/a.md)",
+        "- [Second study](studies/b.md)",
+    ]
+
+
+def test_make_report_writes_goals_from_the_committed_results(tmp_path):
+    """The report script end to end on the fixture dataset and the committed result files."""
+    docs = tmp_path / "docs"
+    (docs / "studies").mkdir(parents=True)
+    (docs / "studies" / "x.md").write_text("# A study\n")
+    results = json.loads((ROOT / "docs" / "results.json").read_text())
+    (tmp_path / "results.json").write_text(json.dumps(results))
+    cmd = [sys.executable, str(ROOT / "examples" / "make_report.py"), "--data", str(ROOT / "tests/fixtures/dataset_v2")]
+    cmd += ["--results", str(tmp_path / "results.json"), "--docs", str(docs), "--samples", "1"]
+    cmd += ["--external-default", str(ROOT / "docs/external_default.json"), "--bench", str(ROOT / "docs/bench.json")]
+    subprocess.run(cmd, check=True, cwd=ROOT, capture_output=True)
+    report = (docs / "results.md").read_text()
+    assert "## Goals of the model issue" in report and "**missed**" in report
+    assert "- [A study](studies/x.md)" in report and (docs / "test_predictions.png").exists()
