@@ -105,18 +105,17 @@ def main() -> None:
         "## Goals of the model issue (raw network unless stated)\n"
         + format_goals(model_goals(results, _load(args.external_default), _load(args.external_raw), _load(args.bench))),
     ]
-    for split in ("test", "ood"):
-        if split in results:
-            parts.append(
-                f"## {split} split\n`garsim eval --data {args.data} --refine --out {args.results}`\n\n"
-                + format_table(results[split])
-            )
+    splits = [split for split in ("test", "ood") if split in results]
+    model_arg = f" --model {args.model}" if args.model else ""
+    command = f"garsim eval --data {args.data}{model_arg} --splits {' '.join(splits)} --refine --out {args.results}"
+    for split in splits:
+        parts.append(f"## {split} split\n`{command}`\n\n" + format_table(results[split]))
     fab = results.get("paired_fabrics")
     if fab:
         parts.append(
             f"## Paired fabrics (test)\n{fab['groups']} groups; ordering agreement "
-            f"{fab['ordering_agreement']} over {fab['pairs_over_gap']} neighbouring pairs whose simulated values "
-            f"differ by more than 2 mm / 2 deg; predicted / simulated spread {fab['spread_ratio']}."
+            f"{fab['ordering_agreement']:.2f} over {fab['pairs_over_gap']} neighbouring pairs whose simulated values "
+            f"differ by more than 2 mm / 2 deg; predicted / simulated spread {fab['spread_ratio']:.3f}."
         )
     external = [Path(p) for p in (args.external_default, args.external_raw, *args.external) if p]
     if external:
