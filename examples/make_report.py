@@ -75,7 +75,7 @@ def main() -> None:
     curve = docs / "training_curve.png"
     if args.run:
         plot_training_curve([Path(r) / "log.csv" for r in args.run], curve)
-    results = json.loads(Path(args.results).read_text())
+    results, bench = _load(args.results), _load(args.bench)
     sim = GarSim.load(args.model) if args.model else GarSim.pretrained()
     store = DatasetStore(args.data)
     recs = [r for r in store.sequences("test")]
@@ -103,7 +103,7 @@ def main() -> None:
         f"# GarSim results\n\nModel: `{results['model']}`; data: `{args.data}` ({results['resolution']} resolution).",
         f"Training curve: `{curve.name}`. Error maps of random test samples: `{maps.name}`.",
         "## Goals of the model issue (raw network unless stated)\n"
-        + format_goals(model_goals(results, _load(args.external_default), _load(args.external_raw), _load(args.bench))),
+        + format_goals(model_goals(results, _load(args.external_default), _load(args.external_raw), bench)),
     ]
     splits = [split for split in ("test", "ood") if split in results]
     model_arg = f" --model {args.model}" if args.model else ""
@@ -120,10 +120,10 @@ def main() -> None:
     external = [Path(p) for p in (args.external_default, args.external_raw, *args.external) if p]
     if external:
         parts.append("## External check set (`../shared/external-eval/check.py`)\n" + _external_table(external))
-    if args.bench:
+    if bench:
         parts.append(
             f"## Speed\n`garsim bench --out {args.bench}` (table and plot: `bench.md`, `bench.png`): "
-            + ", ".join(f"{g.name} {g.value:.1f} ms" for g in speed_goals(_load(args.bench)) if g.value is not None)
+            + ", ".join(f"{g.name} {g.value:.1f} ms" for g in speed_goals(bench) if g.value is not None)
             + "."
         )
     studies_dir = docs / "studies"

@@ -53,9 +53,10 @@ def _worst(values: Mapping[str, float | None]) -> tuple[str, float | None]:
 def split_goals(results: Results, split: str, overall: float, family: float | None) -> list[Goal]:
     """Accuracy of the raw network on one split of ``garsim eval`` (ratio to the prior), and its collisions."""
     table = results.get(split)
+    overall_goal = f"{split} split: raw network / prior, all families"
     if table is None:
-        return [Goal(f"{split} split: raw network / prior, all families", overall, None)]
-    goals = [Goal(f"{split} split: raw network / prior, all families", overall, _ratio(table, "garsim", "all"))]
+        return [Goal(overall_goal, overall, None)]
+    goals = [Goal(overall_goal, overall, _ratio(table, "garsim", "all"))]
     if family is not None:
         families = {f: _ratio(table, "garsim", f) for f in table.get("prior", {}) if f != "all"}
         worst, value = _worst(families)
