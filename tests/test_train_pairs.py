@@ -10,9 +10,10 @@ from model_fixtures import make_sample, make_samples
 
 from garsim.data.sample import FABRICS
 from garsim.model.config import GarSimConfig
+from garsim.train.augment import MirrorAugmented, RemeshAugmented, mirror_sample
 from garsim.train.data import rest_sample
 from garsim.train.losses import LossWeights, fabric_pair_loss, garsim_loss
-from garsim.train.pairs import pair_ids, pair_key, plan_batches
+from garsim.train.pairs import MIRROR_SUFFIX, pair_ids, pair_key, pair_keys, plan_batches
 from garsim.train.trainer import TrainConfig, Trainer
 
 
@@ -34,8 +35,27 @@ def test_keys_name_stored_paired_samples_only():
     remeshed = dataclasses.replace(group[0], meta={**group[0].meta, "remesh": {"variant": 0}})
     assert pair_key(remeshed) is None
     lone = _paired(job="train-00007")[:1]
-    ids = pair_ids([*group, make_sample(), *lone], count=8)
-    assert ids.tolist() == [0, 0, 0, 0, -1, -1, -1, -1]  # a group of one is no group; padded indices are in none
+    ids = pair_ids([*group, make_sample(), *lone])
+    assert ids.tolist() == [0, 0, 0, 0, -1, -1]  # a group of one is no group
+
+
+class _Unbuildable(list):
+    """Sources whose samples must not be built (indexing fails)."""
+
+    def __getitem__(self, i):
+        raise AssertionError("a remeshed variant was built to find its pair key")
+
+
+def test_augmented_keys_put_mirror_images_in_groups_of_their_own_without_building_variants():
+    group = _paired()
+    remeshed = RemeshAugmented(group, _Unbuildable(group), copies=2)
+    both = MirrorAugmented(remeshed)
+    keys = pair_keys(both)
+    assert len(keys) == len(both) == 24
+    assert keys[:4] == [pair_key(s) for s in group] and keys[4:12] == [None] * 8
+    assert keys[12:16] == [pair_key(mirror_sample(s)) for s in group] and keys[16:] == [None] * 8
+    assert keys[12] != keys[0] and keys[12].endswith(MIRROR_SUFFIX)
+    assert pair_ids(both).tolist() == [0] * 4 + [-1] * 8 + [1] * 4 + [-1] * 8
 
 
 def test_plans_keep_groups_together_and_cover_every_index_once():

@@ -34,6 +34,7 @@ from garsim.garments.garment import Garment
 from garsim.garments.remesh import BarycentricMap, decimate, transfer_barycentric
 from garsim.geometry.cache import ContentCache, content_key
 from garsim.model.inputs import body_yaw_frame
+from garsim.train.pairs import MIRROR_SUFFIX, pair_keys
 
 MAX_FRACTION = 0.7
 """Largest variant as a share of the full resolution's vertices (near 1 a variant is the full mesh again)."""
@@ -150,6 +151,10 @@ class RemeshAugmented(_LazySamples):
         s, v = divmod(i - len(self.originals), self.copies)
         return remesh_variant(self.sources[s], v, self.seed, self.min_vertices[s], self.max_fraction)
 
+    def pair_keys(self) -> list[str | None]:
+        """The originals' paired-fabric keys; a remeshed variant is in no group (``train.pairs``)."""
+        return pair_keys(self.originals) + [None] * (len(self) - len(self.originals))
+
 
 def remesh_augmented(
     originals: Sequence[Sample], full: Sequence[Sample], copies: int, seed: int = 0, max_fraction: float = MAX_FRACTION
@@ -221,3 +226,8 @@ class MirrorAugmented(_LazySamples):
     def _item(self, i: int) -> Sample:
         n = len(self.samples)
         return self.samples[i] if i < n else mirror_sample(self.samples[i - n])
+
+    def pair_keys(self) -> list[str | None]:
+        """The samples' paired-fabric keys, then their mirror images' (``pair_key`` of ``mirror_sample``)."""
+        keys = pair_keys(self.samples)
+        return keys + [None if k is None else k + MIRROR_SUFFIX for k in keys]

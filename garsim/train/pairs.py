@@ -15,24 +15,32 @@ import numpy as np
 
 from garsim.data.sample import Sample
 
+MIRROR_SUFFIX = "~mirror"
+"""Appended to a mirrored sample's key: its group is the mirror images of one group, never mixed with it."""
+
 
 def pair_key(sample: Sample) -> str | None:
     """The paired-fabric group of a stored training sample, or None (unpaired, rest or remeshed samples)."""
     meta = sample.meta
     if not meta.get("paired") or meta.get("rest") or "remesh" in meta or "job" not in meta:
         return None
-    return f"{meta['job']}@{meta.get('frame', 0)}#{len(sample.garment)}"
+    key = f"{meta['job']}@{meta.get('frame', 0)}#{len(sample.garment)}"
+    return key + MIRROR_SUFFIX if meta.get("mirror") else key
 
 
-def pair_ids(samples: Sequence[Sample], count: int | None = None) -> np.ndarray:
-    """(count,) int64 group id of each sample (-1: in no group of two or more). Only the first ``len(samples)``
-    of ``count`` indices are looked at (the rest, e.g. remeshed variants appended after them, are -1)."""
-    keys = [pair_key(s) for s in samples]
+def pair_keys(samples: Sequence[Sample]) -> list[str | None]:
+    """``pair_key`` of every sample; an augmented sequence that knows its keys without building its variants
+    (``augment.RemeshAugmented``, ``augment.MirrorAugmented``) answers through its own ``pair_keys``."""
+    own = getattr(samples, "pair_keys", None)
+    return own() if callable(own) else [pair_key(s) for s in samples]
+
+
+def pair_ids(samples: Sequence[Sample]) -> np.ndarray:
+    """(len(samples),) int64 group id of each sample (-1: in no group of two or more)."""
+    keys = pair_keys(samples)
     sizes = Counter(k for k in keys if k is not None)
     groups = {k: g for g, k in enumerate(sorted(k for k, n in sizes.items() if n > 1))}
-    ids = np.full(len(samples) if count is None else count, -1, dtype=np.int64)
-    ids[: len(keys)] = [groups.get(k, -1) for k in keys]
-    return ids
+    return np.array([groups.get(k, -1) if k is not None else -1 for k in keys], dtype=np.int64)
 
 
 def plan_batches(ids: np.ndarray, batch_size: int, rng: np.random.Generator) -> list[list[int]]:

@@ -113,7 +113,8 @@ class GraphDataset(Dataset):
     ):
         """``make_graph``: the model's graph builder (``GraphModel.make_graph``, ``build_graph``'s signature);
         ``pairs``: give every graph its paired-fabric group (``train.pairs.pair_ids``) as ``pair``; remeshed
-        variants appended after the stored samples (``augment.RemeshAugmented``) are in none."""
+        variants (``augment.RemeshAugmented``) are in none, mirror images (``augment.MirrorAugmented``) in groups
+        of their own."""
         if not (hasattr(samples, "__len__") and hasattr(samples, "__getitem__")):
             samples = list(samples)
         if len(samples) == 0:
@@ -123,7 +124,7 @@ class GraphDataset(Dataset):
         self.with_collision = with_collision
         self.cache = cache
         self.make_graph = make_graph
-        self.pair_ids = pair_ids(getattr(samples, "originals", samples), len(samples)) if pairs else None
+        self.pair_ids = pair_ids(samples) if pairs else None
         self._graphs: dict[int, GarmentGraph] = {}
 
     def __len__(self) -> int:
