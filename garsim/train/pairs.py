@@ -40,7 +40,7 @@ def pair_ids(samples: Sequence[Sample]) -> np.ndarray:
     keys = pair_keys(samples)
     sizes = Counter(k for k in keys if k is not None)
     groups = {k: g for g, k in enumerate(sorted(k for k, n in sizes.items() if n > 1))}
-    return np.array([groups.get(k, -1) if k is not None else -1 for k in keys], dtype=np.int64)
+    return np.array([groups.get(k, -1) for k in keys], dtype=np.int64)
 
 
 def plan_batches(ids: np.ndarray, batch_size: int, rng: np.random.Generator) -> list[list[int]]:
