@@ -64,6 +64,7 @@ def main() -> None:
     parser.add_argument("--model", default=None, help="model folder (default: the shipped model)")
     parser.add_argument("--data", required=True)
     parser.add_argument("--results", required=True, help="JSON written by `garsim eval --refine --out`")
+    parser.add_argument("--results-full", help="`garsim eval --resolution full --out` (collisions at full resolution)")
     parser.add_argument("--external-default", help="check.py --json with the API defaults")
     parser.add_argument("--external-raw", help="examples/external_check.py --raw --json (the raw network)")
     parser.add_argument("--external", nargs="*", default=[], help="further check.py --json files for the table")
@@ -75,7 +76,7 @@ def main() -> None:
     curve = docs / "training_curve.png"
     if args.run:
         plot_training_curve([Path(r) / "log.csv" for r in args.run], curve)
-    results, bench = _load(args.results), _load(args.bench)
+    results, bench, full = _load(args.results), _load(args.bench), _load(args.results_full)
     sim = GarSim.load(args.model) if args.model else GarSim.pretrained()
     store = DatasetStore(args.data)
     recs = [r for r in store.sequences("test")]
@@ -103,13 +104,17 @@ def main() -> None:
         f"# GarSim results\n\nModel: `{results['model']}`; data: `{args.data}` ({results['resolution']} resolution).",
         f"Training curve: `{curve.name}`. Error maps of random test samples: `{maps.name}`.",
         "## Goals of the model issue (raw network unless stated)\n"
-        + format_goals(model_goals(results, _load(args.external_default), _load(args.external_raw), bench)),
+        + format_goals(model_goals(results, _load(args.external_default), _load(args.external_raw), bench, full)),
     ]
     splits = [split for split in ("test", "ood") if split in results]
     model_arg = f" --model {args.model}" if args.model else ""
     command = f"garsim eval --data {args.data}{model_arg} --splits {' '.join(splits)} --refine --out {args.results}"
     for split in splits:
         parts.append(f"## {split} split\n`{command}`\n\n" + format_table(results[split]))
+    if full:
+        command = f"garsim eval --data {args.data}{model_arg} --resolution full --out {args.results_full}"
+        for split in (split for split in ("test", "ood") if split in full):
+            parts.append(f"## {split} split at the simulated resolution\n`{command}`\n\n" + format_table(full[split]))
     fab = results.get("paired_fabrics")
     if fab:
         parts.append(

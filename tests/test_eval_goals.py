@@ -62,6 +62,21 @@ def test_goals_from_hand_made_results():
     assert goals["ood split: raw network / prior, all families"].met is None  # no ood table: not measured
 
 
+def test_collision_goals_at_the_simulated_resolution_carry_the_truths_own_figure():
+    low = _results()
+    low["test"]["ground truth"] = {"all": _row(0.0, inside=0.1, through=2.5)}
+    full = {"test": {"garsim": {"all": _row(10.0, inside=0.2, through=0.4)}, "ground truth": {"all": _row(0.0)}}}
+    goals = _by_name(model_goals(low, full=full))
+    through_low = goals["test split: raw network, edges through the body"]
+    assert through_low.met is False and through_low.truth == 2.5  # the decimated truth misses the bound itself
+    through_full = goals["test split, full res.: raw network, edges through the body"]
+    assert through_full.value == 0.4 and through_full.met and through_full.truth == 0.0
+    assert goals["ood split, full res.: raw network, vertices inside the body"].met is None  # no ood table
+    assert "| test split: raw network, edges through the body | <= 1% | 2% | 2.5% | **missed** |" in format_goals(
+        list(goals.values())
+    )
+
+
 def test_missing_inputs_are_not_measured_never_met():
     goals = model_goals({})
     assert goals and all(g.value is None and g.met is None for g in goals)
@@ -74,10 +89,10 @@ def test_format_goals_marks_each_verdict():
         [Goal("a", 0.4, 0.3), Goal("b", 0.6, 0.7), Goal("c", 0.9, 0.95, at_least=True, unit=""), Goal("d", 1, None)]
     )
     lines = table.splitlines()
-    assert lines[2] == "| a | <= 0.4x | 0.3x | met |"
-    assert lines[3] == "| b | <= 0.6x | 0.7x | **missed** |"
-    assert lines[4] == "| c | >= 0.9 | 0.95 | met |"
-    assert lines[5] == "| d | <= 1x | - | not measured |"
+    assert lines[2] == "| a | <= 0.4x | 0.3x | - | met |"
+    assert lines[3] == "| b | <= 0.6x | 0.7x | - | **missed** |"
+    assert lines[4] == "| c | >= 0.9 | 0.95 | - | met |"
+    assert lines[5] == "| d | <= 1x | - | - | not measured |"
     assert lines[-1] == "2 met, 1 missed, 1 not measured."
 
 
@@ -106,8 +121,10 @@ def test_make_report_writes_goals_from_the_committed_results(tmp_path):
     (docs / "studies" / "x.md").write_text("# A study\n")
     cmd = [sys.executable, str(ROOT / "examples" / "make_report.py"), "--data", str(ROOT / "tests/fixtures/dataset_v2")]
     cmd += ["--results", str(ROOT / "docs/results.json"), "--docs", str(docs), "--samples", "1"]
+    cmd += ["--results-full", str(ROOT / "docs/results_full.json")]
     cmd += ["--external-default", str(ROOT / "docs/external_default.json"), "--bench", str(ROOT / "docs/bench.json")]
     subprocess.run(cmd, check=True, cwd=ROOT, capture_output=True)
     report = (docs / "results.md").read_text()
     assert "## Goals of the model issue" in report and "**missed**" in report
+    assert "## test split at the simulated resolution" in report and "test split, full res.:" in report
     assert "- [A study](studies/x.md)" in report and (docs / "test_predictions.png").exists()
