@@ -120,7 +120,9 @@ def main() -> None:
         parts.append(
             f"## Paired fabrics (test)\n{fab['groups']} groups; ordering agreement "
             f"{fab['ordering_agreement']:.2f} over {fab['pairs_over_gap']} neighbouring pairs whose simulated values "
-            f"differ by more than 2 mm / 2 deg; predicted / simulated spread {fab['spread_ratio']:.3f}."
+            f"differ by more than 2 mm / 2 deg; predicted / simulated spread {fab['spread_ratio']:.3f}; a fabric "
+            f"midway between neighbouring presets (physical values) predicted between them in "
+            f"{fab['midway_between']:.0%} of the distance and fold checks."
         )
     external = [Path(p) for p in (args.external_default, args.external_raw, *args.external) if p]
     if external:

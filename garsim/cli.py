@@ -569,7 +569,8 @@ def cmd_eval(args: argparse.Namespace) -> int:
         report["paired_fabrics"] = fab
         print(
             f"paired-fabric groups (test): {fab['groups']}, ordering agreement {fab['ordering_agreement']} over "
-            f"{fab['pairs_over_gap']} neighbouring pairs past the gap, spread ratio {fab['spread_ratio']}"
+            f"{fab['pairs_over_gap']} neighbouring pairs past the gap, spread ratio {fab['spread_ratio']}, "
+            f"midway fabrics between their presets {fab['midway_between']}"
         )
     if args.out:
         print(_write_json(args.out, report))

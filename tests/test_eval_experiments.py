@@ -123,6 +123,14 @@ def test_paired_fabric_agreement_of_an_oracle_and_of_a_reversed_model(tmp_path):
         def predict(self, samples):
             return [s.target for s in samples][::-1]
 
+    class Overshoot:  # the presets right, a fabric given by physical values drapes 30% further out than either
+        def predict(self, samples):
+            return [s.target * (1.3 if s.fabric == "custom" else 1.0) for s in samples]
+
     good = paired_fabric_agreement(Truth(), tmp_path)
     assert good["groups"] == 1 and good["ordering_agreement"] == 1.0 and good["spread_ratio"] == pytest.approx(1.0)
+    assert good["midway_between"] == 1.0  # a midway fabric scored on its neighbours' own targets: between them
     assert paired_fabric_agreement(Reversed(), tmp_path)["ordering_agreement"] == 0.0
+    over = paired_fabric_agreement(Overshoot(), tmp_path)
+    # the distances of all 3 midway fabrics fall outside their presets'; a scaled patch keeps its fold angles: 3 of 6
+    assert over["ordering_agreement"] == 1.0 and over["midway_between"] == 0.5

@@ -5,6 +5,7 @@ fabric awareness on paired groups (Fig. 7: one template in four fabrics, simulat
 
 from __future__ import annotations
 
+import dataclasses
 import os
 from collections import defaultdict
 from typing import Any
@@ -12,9 +13,10 @@ from typing import Any
 import numpy as np
 
 from garsim.api import postprocess
-from garsim.data.sample import FABRICS, Sample
+from garsim.data.sample import CUSTOM_FABRIC, FABRICS, Sample
 from garsim.data.store import DatasetStore
 from garsim.eval.metrics import garment_metrics, jitter_mm
+from garsim.garments.fabrics import interpolate_fabric
 from garsim.geometry.proximity import nearest_vertices
 from garsim.model.baselines import nearest_vertex_drape
 
@@ -138,11 +140,15 @@ def paired_fabric_agreement(
     resolution: str = "low",
     min_gap_mm: float = 2.0,
     min_gap_deg: float = 2.0,
+    between_tol: float = 0.1,
 ) -> dict[str, Any]:
     """Fig. 7 on paired groups (one template, four fabrics, same body and pose): simulated vs predicted mean
     distance to the body (mm) and mean fold angle (deg) per fabric, the share of neighbouring fabric pairs
     (silk-cotton, cotton-denim, denim-leather) whose simulated values differ by more than the gap and whose
-    predictions are ordered the same way, and the predicted / simulated spread (lightest to stiffest)."""
+    predictions are ordered the same way, and the predicted / simulated spread (lightest to stiffest).
+    Also the share of the physical fabrics midway between neighbouring presets (``interpolate_fabric(a, b, 0.5)``)
+    whose predicted distance and fold angle lie between the two presets' predictions (within ``between_tol`` mm or
+    deg): the model issue's "values between two presets give results between theirs"."""
     from garsim.physics.newton_sim import mean_fold_angle
 
     store = DatasetStore(data_dir)
@@ -152,19 +158,29 @@ def paired_fabric_agreement(
             for s in rec.samples(resolution):
                 groups[(rec.meta["job"], s.meta["frame"])][s.fabric] = s
     complete = [g for g in groups.values() if set(g) == set(FABRICS)]
-    rows, agree, pairs, spread = [], 0, 0, []
+    rows, agree, pairs, spread, between = [], 0, 0, [], []
+    midway = [interpolate_fabric(a, b, 0.5).values() for a, b in zip(FABRICS[:-1], FABRICS[1:])]
     for g in complete:
         samples = [g[f] for f in FABRICS]
         preds = _predict_all(model, samples)
-        sim_d = [1000.0 * float(nearest_vertices(s.target, s.body_target)[1].mean()) for s in samples]
-        pred_d = [1000.0 * float(nearest_vertices(p, s.body_target)[1].mean()) for s, p in zip(samples, preds)]
-        sim_a = [mean_fold_angle(s.target, s.garment_faces) for s in samples]
-        pred_a = [mean_fold_angle(p, s.garment_faces) for s, p in zip(samples, preds)]
-        for sim, pred, gap in ((sim_d, pred_d, min_gap_mm), (sim_a, pred_a, min_gap_deg)):
+        mids = [dataclasses.replace(s, fabric=CUSTOM_FABRIC, fabric_values=v) for s, v in zip(samples, midway)]
+        mid_preds = _predict_all(model, mids)
+
+        def distance(verts: list[np.ndarray]) -> list[float]:
+            return [1000.0 * float(nearest_vertices(v, s.body_target)[1].mean()) for s, v in zip(samples, verts)]
+
+        def fold(verts: list[np.ndarray]) -> list[float]:
+            return [mean_fold_angle(v, s.garment_faces) for s, v in zip(samples, verts)]
+
+        sim_d, pred_d, mid_d = distance([s.target for s in samples]), distance(preds), distance(mid_preds)
+        sim_a, pred_a, mid_a = fold([s.target for s in samples]), fold(preds), fold(mid_preds)
+        for sim, pred, mid, gap in ((sim_d, pred_d, mid_d, min_gap_mm), (sim_a, pred_a, mid_a, min_gap_deg)):
             for i in range(len(FABRICS) - 1):
                 if abs(sim[i + 1] - sim[i]) > gap:
                     pairs += 1
                     agree += int(np.sign(pred[i + 1] - pred[i]) == np.sign(sim[i + 1] - sim[i]))
+                low, high = sorted((pred[i], pred[i + 1]))
+                between.append(low - between_tol <= mid[i] <= high + between_tol)
         if abs(sim_d[-1] - sim_d[0]) > min_gap_mm:
             spread.append((pred_d[-1] - pred_d[0]) / (sim_d[-1] - sim_d[0]))
         rows.append(
@@ -175,6 +191,8 @@ def paired_fabric_agreement(
                 "pred_distance_mm": pred_d,
                 "sim_fold_deg": sim_a,
                 "pred_fold_deg": pred_a,
+                "midway_distance_mm": mid_d,
+                "midway_fold_deg": mid_a,
             }
         )
     return {
@@ -182,6 +200,7 @@ def paired_fabric_agreement(
         "pairs_over_gap": pairs,
         "ordering_agreement": agree / pairs if pairs else None,
         "spread_ratio": float(np.mean(spread)) if spread else None,
+        "midway_between": float(np.mean(between)) if between else None,
         "rows": rows,
     }
 

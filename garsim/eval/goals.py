@@ -101,6 +101,13 @@ def fabric_goals(results: Results) -> list[Goal]:
     return [
         Goal("paired fabrics: ordering agreement", 0.9, fab.get("ordering_agreement"), at_least=True, unit=""),
         Goal("paired fabrics: predicted / simulated spread", 0.6, fab.get("spread_ratio"), at_least=True, unit=""),
+        Goal(
+            "paired fabrics: midway fabrics predicted between the presets",
+            1.0,
+            fab.get("midway_between"),
+            at_least=True,
+            unit="",
+        ),
     ]
 
 
