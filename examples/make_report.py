@@ -20,7 +20,7 @@ from garsim.api import GarSim
 from garsim.data.store import DatasetStore
 from garsim.eval.experiments import format_table
 from garsim.eval.goals import format_goals, model_goals, speed_goals
-from garsim.eval.plots import plot_training_curve
+from garsim.eval.plots import plot_paired_fabrics, plot_training_curve
 from garsim.geometry.render import render_grid
 
 
@@ -122,7 +122,8 @@ def main() -> None:
             f"{fab['ordering_agreement']:.2f} over {fab['pairs_over_gap']} neighbouring pairs whose simulated values "
             f"differ by more than 2 mm / 2 deg; predicted / simulated spread {fab['spread_ratio']:.3f}; a fabric "
             f"midway between neighbouring presets (physical values) predicted between them in "
-            f"{fab['midway_between']:.0%} of the distance and fold checks."
+            f"{fab['midway_between']:.0%} of the distance and fold checks. Per group: "
+            f"`{plot_paired_fabrics(fab, docs / 'paired_fabrics.png').name}`."
         )
     external = [Path(p) for p in (args.external_default, args.external_raw, *args.external) if p]
     if external:

@@ -1,6 +1,6 @@
 import pytest
 
-from garsim.eval.plots import plot_bars, plot_training_curve
+from garsim.eval.plots import plot_bars, plot_paired_fabrics, plot_training_curve
 
 
 def test_training_curve_png(tmp_path):
@@ -21,3 +21,11 @@ def test_training_curve_png(tmp_path):
 def test_bars_png(tmp_path):
     png = plot_bars({"silk": {"a": 1.0, "b": 2.0}, "leather": {"a": 3.0}}, "mm", "t", tmp_path / "b.png")
     assert png.stat().st_size > 5000
+
+
+def test_paired_fabrics_png(tmp_path):
+    row = {"garment": "skirt", "sim_distance_mm": [10, 12, 15, 20], "pred_distance_mm": [11, 12, 13, 14]}
+    row |= {"sim_fold_deg": [30, 28, 25, 20], "pred_fold_deg": [29, 28, 27, 26], "midway_distance_mm": [11, 12, 13]}
+    fab = {"groups": 1, "ordering_agreement": 1.0, "spread_ratio": 0.3, "rows": [row]}
+    png = plot_paired_fabrics(fab, tmp_path / "f.png")
+    assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and png.stat().st_size > 5000

@@ -68,6 +68,42 @@ def plot_bars(values: dict[str, dict[str, float]], ylabel: str, title: str, out_
     return atomic_write(out_png, lambda tmp: fig.savefig(tmp, format="png"))
 
 
+def plot_paired_fabrics(fab: dict, out_png: str | os.PathLike) -> Path:
+    """Fig. 7 analog from ``paired_fabric_agreement``: per paired group, the simulated (solid) and predicted
+    (dashed, the midway physical fabrics as open circles) mean distance to the body and fold angle, silk to
+    leather, each drawn as the change from its own silk value so that groups of different garments share an axis."""
+    from garsim.data.sample import FABRICS
+
+    fig = _figure()
+    axes = fig.subplots(1, 2)
+    x = list(range(len(FABRICS)))
+    mid_x = [i + 0.5 for i in x[:-1]]
+    colors = [f"C{k % 10}" for k in range(len(fab["rows"]))]
+    for ax, key, unit in zip(axes, ("distance_mm", "fold_deg"), ("mm", "deg")):
+        for row, color in zip(fab["rows"], colors):
+            sim, pred = row[f"sim_{key}"], row[f"pred_{key}"]
+            ax.plot(x, [v - sim[0] for v in sim], color=color, marker="o", ms=3, label=row["garment"])
+            ax.plot(x, [v - pred[0] for v in pred], color=color, ls="--", marker="o", ms=3)
+            if f"midway_{key}" in row:
+                ax.plot(
+                    mid_x, [v - pred[0] for v in row[f"midway_{key}"]], color=color, ls="none", marker="o", mfc="none"
+                )
+        what = "distance to the body" if key == "distance_mm" else "mean fold angle"
+        ax.set(ylabel=f"change from silk ({unit})", title=what)
+        ax.set_xticks(x, list(FABRICS))
+        ax.grid(True, lw=0.3, alpha=0.5)
+    axes[0].legend(fontsize=7)
+    agreement, spread = fab.get("ordering_agreement"), fab.get("spread_ratio")
+    if agreement is not None and spread is not None:
+        fig.suptitle(
+            f"{fab['groups']} paired groups, simulated (solid) vs predicted (dashed; open: midway physical values): "
+            f"ordering agreement {agreement:.2f}, spread {spread:.2f}",
+            fontsize=10,
+        )
+    fig.tight_layout()
+    return atomic_write(out_png, lambda tmp: fig.savefig(tmp, format="png"))
+
+
 def plot_bench(report: dict, out_png: str | os.PathLike) -> Path:
     """Log-log garment vertices vs ms from a ``garsim bench`` report: the network forward, one ``GarSim.drape``
     of a new garment and of a new pose, the refinement, a frame of ``drape_sequence`` (CPU medians), the cold
