@@ -111,19 +111,19 @@ def main() -> None:
     command = f"garsim eval --data {args.data}{model_arg} --splits {' '.join(splits)} --refine --out {args.results}"
     for split in splits:
         parts.append(f"## {split} split\n`{command}`\n\n" + format_table(results[split]))
-    if full:
-        command = f"garsim eval --data {args.data}{model_arg} --resolution full --out {args.results_full}"
-        for split in (split for split in ("test", "ood") if split in full):
-            parts.append(f"## {split} split at the simulated resolution\n`{command}`\n\n" + format_table(full[split]))
+    full_command = f"garsim eval --data {args.data}{model_arg} --resolution full --out {args.results_full}"
+    for split in [split for split in ("test", "ood") if split in (full or {})]:
+        parts.append(f"## {split} split at the simulated resolution\n`{full_command}`\n\n" + format_table(full[split]))
     fab = results.get("paired_fabrics")
     if fab:
+        fab_png = plot_paired_fabrics(fab, docs / "paired_fabrics.png")
         parts.append(
             f"## Paired fabrics (test)\n{fab['groups']} groups; ordering agreement "
             f"{fab['ordering_agreement']:.2f} over {fab['pairs_over_gap']} neighbouring pairs whose simulated values "
             f"differ by more than 2 mm / 2 deg; predicted / simulated spread {fab['spread_ratio']:.3f}; a fabric "
             f"midway between neighbouring presets (physical values) predicted between them in "
             f"{fab['midway_between']:.0%} of the distance and fold checks. Per group: "
-            f"`{plot_paired_fabrics(fab, docs / 'paired_fabrics.png').name}`."
+            f"`{fab_png.name}`."
         )
     external = [Path(p) for p in (args.external_default, args.external_raw, *args.external) if p]
     if external:

@@ -133,6 +133,14 @@ def score_predictions(
     return results
 
 
+def _distance_and_fold(samples: list[Sample], verts: list[np.ndarray]) -> tuple[list[float], list[float]]:
+    """Per sample, the garment ``verts``' mean distance to the target body (mm) and mean fold angle (deg)."""
+    from garsim.physics.newton_sim import mean_fold_angle
+
+    distance = [1000.0 * float(nearest_vertices(v, s.body_target)[1].mean()) for s, v in zip(samples, verts)]
+    return distance, [mean_fold_angle(v, s.garment_faces) for s, v in zip(samples, verts)]
+
+
 def paired_fabric_agreement(
     model: Any,
     data_dir: str | os.PathLike,
@@ -149,8 +157,6 @@ def paired_fabric_agreement(
     Also the share of the physical fabrics midway between neighbouring presets (``interpolate_fabric(a, b, 0.5)``)
     whose predicted distance and fold angle lie between the two presets' predictions (within ``between_tol`` mm or
     deg): the model issue's "values between two presets give results between theirs"."""
-    from garsim.physics.newton_sim import mean_fold_angle
-
     store = DatasetStore(data_dir)
     groups: dict[tuple[str, int], dict[str, Sample]] = defaultdict(dict)
     for rec in store.sequences(split):
@@ -164,16 +170,9 @@ def paired_fabric_agreement(
         samples = [g[f] for f in FABRICS]
         preds = _predict_all(model, samples)
         mids = [dataclasses.replace(s, fabric=CUSTOM_FABRIC, fabric_values=v) for s, v in zip(samples, midway)]
-        mid_preds = _predict_all(model, mids)
-
-        def distance(verts: list[np.ndarray]) -> list[float]:
-            return [1000.0 * float(nearest_vertices(v, s.body_target)[1].mean()) for s, v in zip(samples, verts)]
-
-        def fold(verts: list[np.ndarray]) -> list[float]:
-            return [mean_fold_angle(v, s.garment_faces) for s, v in zip(samples, verts)]
-
-        sim_d, pred_d, mid_d = distance([s.target for s in samples]), distance(preds), distance(mid_preds)
-        sim_a, pred_a, mid_a = fold([s.target for s in samples]), fold(preds), fold(mid_preds)
+        sim_d, sim_a = _distance_and_fold(samples, [s.target for s in samples])
+        pred_d, pred_a = _distance_and_fold(samples, preds)
+        mid_d, mid_a = _distance_and_fold(samples, _predict_all(model, mids))
         for sim, pred, mid, gap in ((sim_d, pred_d, mid_d, min_gap_mm), (sim_a, pred_a, mid_a, min_gap_deg)):
             for i in range(len(FABRICS) - 1):
                 if abs(sim[i + 1] - sim[i]) > gap:

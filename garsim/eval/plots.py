@@ -79,7 +79,8 @@ def plot_paired_fabrics(fab: dict, out_png: str | os.PathLike) -> Path:
     x = list(range(len(FABRICS)))
     mid_x = [i + 0.5 for i in x[:-1]]
     colors = [f"C{k % 10}" for k in range(len(fab["rows"]))]
-    for ax, key, unit in zip(axes, ("distance_mm", "fold_deg"), ("mm", "deg")):
+    panels = (("distance_mm", "mm", "distance to the body"), ("fold_deg", "deg", "mean fold angle"))
+    for ax, (key, unit, what) in zip(axes, panels):
         for row, color in zip(fab["rows"], colors):
             sim, pred = row[f"sim_{key}"], row[f"pred_{key}"]
             ax.plot(x, [v - sim[0] for v in sim], color=color, marker="o", ms=3, label=row["garment"])
@@ -88,7 +89,6 @@ def plot_paired_fabrics(fab: dict, out_png: str | os.PathLike) -> Path:
                 ax.plot(
                     mid_x, [v - pred[0] for v in row[f"midway_{key}"]], color=color, ls="none", marker="o", mfc="none"
                 )
-        what = "distance to the body" if key == "distance_mm" else "mean fold angle"
         ax.set(ylabel=f"change from silk ({unit})", title=what)
         ax.set_xticks(x, list(FABRICS))
         ax.grid(True, lw=0.3, alpha=0.5)
