@@ -35,6 +35,9 @@ def test_evaluate_prior_error_is_the_known_offset(tmp_path):
     # every vertex 5 cm out, but half the coarse patch's long edges dip into the sphere (midpoints down to r = 0.9986)
     assert res["prior"]["all"]["inside_pct"] == 0.0 and res["prior"]["all"]["edge_crossing_pct"] == 50.0
     assert "jitter_mm" not in res["prior"]["all"]  # settled poses, not an animation
+    gt, prior = res["ground truth"]["all"], res["prior"]["all"]
+    assert (gt["correction_cosine"], gt["correction_gain"]) == pytest.approx((1.0, 1.0))
+    assert (prior["correction_cosine"], prior["correction_gain"]) == (0.0, 0.0)
     table = format_table(res)
     assert "| prior | skirt | 2 | 10.00 |" in table and "jitter" not in table
 

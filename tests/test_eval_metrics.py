@@ -4,6 +4,7 @@ import trimesh
 
 from garsim.eval.metrics import (
     collision_pct,
+    correction_alignment,
     edge_crossing_pct,
     edge_length_error_mm,
     euclidean_error_mm,
@@ -96,6 +97,18 @@ def test_jitter_is_the_mean_second_difference():
     assert np.isclose(jitter_mm(frames), 1.0)
     with pytest.raises(ValueError, match="T >= 3"):
         jitter_mm(frames[:2])
+
+
+def test_correction_alignment_hand_computed():
+    """Needed corrections +x (1 m) at both vertices; predicted +x 0.5 m at one, +y 0.5 m at the other: cosine
+    (0.5 + 0) / (sqrt(0.5) * sqrt(2)) = 0.5, gain 0.5 / 1; the truth itself 1 and 1; no correction 0 and 0."""
+    prior = np.zeros((2, 3))
+    truth = np.array([[1.0, 0, 0], [1.0, 0, 0]])
+    pred = np.array([[0.5, 0, 0], [0, 0.5, 0]])
+    assert np.allclose(correction_alignment(pred, prior, truth), (0.5, 0.5))
+    assert np.allclose(correction_alignment(truth, prior, truth), (1.0, 1.0))
+    assert correction_alignment(prior, prior, truth) == (0.0, 0.0)
+    assert np.allclose(correction_alignment(-truth, prior, truth), (-1.0, 1.0))
 
 
 def test_garment_metrics_reports_every_metric():

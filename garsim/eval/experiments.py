@@ -15,7 +15,7 @@ import numpy as np
 from garsim.api import postprocess
 from garsim.data.sample import CUSTOM_FABRIC, FABRICS, Sample
 from garsim.data.store import DatasetStore
-from garsim.eval.metrics import garment_metrics, jitter_mm
+from garsim.eval.metrics import correction_alignment, garment_metrics, jitter_mm
 from garsim.garments.fabrics import interpolate_fabric
 from garsim.geometry.proximity import nearest_vertices
 from garsim.model.baselines import nearest_vertex_drape
@@ -103,10 +103,11 @@ def score_predictions(
 ) -> dict[str, dict[str, dict[str, float]]]:
     """{method: {garment_type: {metric: mean, "frames": n}}} (and 'all') of each method's predictions of the samples.
 
-    Metrics: ``garsim.eval.metrics.GarmentMetrics``; a method named ``base+post`` (a post-processed row) leaves
-    out the collision metrics its post-process enforces (``POSTPROCESS_OPTIMISES``). Where the samples hold
-    animations (>= 3 consecutive dynamic frames of a sequence) every row also has ``jitter_mm`` (mean over them)
-    and ``sequences``. Methods are ordered models first, then "prior", "nearest", "ground truth".
+    Metrics: ``garsim.eval.metrics.GarmentMetrics`` and ``correction_alignment`` (its cosine and gain); a method
+    named ``base+post`` (a post-processed row) leaves out the collision metrics its post-process enforces
+    (``POSTPROCESS_OPTIMISES``). Where the samples hold animations (>= 3 consecutive dynamic frames of a sequence)
+    every row also has ``jitter_mm`` (mean over them) and ``sequences``. Methods are ordered models first, then
+    "prior", "nearest", "ground truth".
     """
     results: dict[str, dict[str, dict[str, float]]] = {}
     animations = _animations(samples)
@@ -117,6 +118,7 @@ def score_predictions(
         for s, p in zip(samples, preds):
             row = garment_metrics(p, s.target, s.garment_faces, s.body_target, s.body_faces).as_dict()
             row = {k: v for k, v in row.items() if k not in enforced}
+            row["correction_cosine"], row["correction_gain"] = correction_alignment(p, s.prior, s.target)
             rows[s.garment_type].append(row)
             rows["all"].append(row)
         results[method] = {
@@ -213,6 +215,8 @@ TABLE_COLUMNS: tuple[tuple[str, str, str], ...] = (
     ("inside_pct", "inside (%)", ".2f"),
     ("edge_crossing_pct", "edges through body (%)", ".2f"),
     ("edge_length_error_mm", "edge-length error (mm)", ".2f"),
+    ("correction_cosine", "correction cos.", ".2f"),
+    ("correction_gain", "correction gain", ".2f"),
     ("jitter_mm", "jitter (mm/frame²)", ".3f"),
 )
 """(metric key, column header, number format) of ``format_table``, in order."""

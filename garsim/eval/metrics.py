@@ -18,6 +18,10 @@ With x the predicted garment (N, 3), x̄ the ground truth, E its unique mesh edg
   length is at least ``min_rest`` (5 mm: seam edges are left out) and that have a free end, the max, 99th percentile
   and mean of the stretch ratio ‖x_i − x_j‖ / rest and the share over 1.5x; inside (%) and edge crossings (%), of
   all vertices / edges and of the free ones (pinned vertices follow the skinning prior, inside the body or not).
+- Correction alignment (``correction_alignment``), with x^p the LBS prior: the cosine between the predicted and the
+  needed correction over the whole garment, (x − x^p) · (x̄ − x^p) / (‖x − x^p‖ ‖x̄ − x^p‖) over the stacked (3N,)
+  vectors (0 when either is zero), and the gain mean_i ‖x_i − x^p_i‖ / mean_i ‖x̄_i − x^p_i‖: whether a model corrects
+  the prior in the right direction, and by how much (the ground truth: 1 and 1; the prior: 0 and 0).
 - Jitter (mm/frame²), for a sequence of T ≥ 3 consecutive frames: 1000 · mean_{t, i} ‖x_i[t+1] − 2 x_i[t] + x_i[t−1]‖
   (the mean vertex acceleration), to be read beside the ground truth's own.
 """
@@ -145,6 +149,17 @@ def constraint_figures(
         "edges_through_pct": 100.0 * float(through.mean()),
         "edges_through_free_pct": 100.0 * float(through[:, free_edges].mean()) if free_edges.any() else 0.0,
     }
+
+
+def correction_alignment(pred: np.ndarray, prior: np.ndarray, truth: np.ndarray) -> tuple[float, float]:
+    """(cosine, gain) of the predicted correction over the prior against the needed one (module docstring)."""
+    got = np.asarray(pred, np.float64) - prior
+    need = np.asarray(truth, np.float64) - prior
+    norm = np.linalg.norm(got) * np.linalg.norm(need)
+    cosine = float(got.ravel() @ need.ravel() / norm) if norm > 0 else 0.0
+    need_mean = np.linalg.norm(need, axis=1).mean()
+    gain = float(np.linalg.norm(got, axis=1).mean() / need_mean) if need_mean > 0 else 0.0
+    return cosine, gain
 
 
 def jitter_mm(frames: np.ndarray) -> float:
