@@ -1,24 +1,29 @@
 #!/usr/bin/env bash
-# The shipped model's recipe, two stages; each stage resumes: rerun the same command to continue.
+# The shipped model's recipe, up to three stages; each stage resumes: rerun the same command to continue.
 #   stage 1: low resolution (~4x decimated, the paper's choice), collision term from 2/3 of the run;
+#   finetune (FINETUNE_EPOCHS > 0): from stage 1's best weights, low resolution, lr FINETUNE_LR, the collision
+#            term from the first step, the same augmentations and pair term;
 #   stage 2 (STAGE2_EPOCHS > 0): from stage 1's best weights, both resolutions (the decimated and the simulated
 #            meshes, 120 to 2,500 vertices); collision term on.
-#   DATA=~/garsim-data/v3 OUT=~/garsim-runs/v1 bash examples/train_v1.sh
+#   DATA=~/garsim-data/v4 OUT=~/garsim-runs/v1 bash examples/train_v1.sh
 # Settings (environment; defaults in brackets):
 #   PROCS [2]          DDP processes (torchrun on CPU); 1 runs `garsim train` in one process
 #   BATCH [4]          samples per batch and process
 #   LR [1e-3]          peak learning rate of stage 1 (stage 2: 3e-4)
-#   STAGE1_EPOCHS [300], STAGE2_EPOCHS [40]
+#   STAGE1_EPOCHS [300], FINETUNE_EPOCHS [0], STAGE2_EPOCHS [40]
+#   FINETUNE_LR [2e-4]
 #   REMESH [0]         remeshed variants of every training sample in stage 1 (garsim train --remesh-copies)
 #   PAIR [0]           weight of the paired-fabric term (garsim train --pair-weight)
 #   MIRROR [0]         1: every training sample also mirrored left to right in stage 1 (garsim train --mirror)
-# v0.5 (garsim/weights/MODEL_CARD.md): PROCS=1 BATCH=8 LR=5e-4 STAGE1_EPOCHS=30 STAGE2_EPOCHS=0 REMESH=2 (and PAIR=2:
+# v0.6 and later (garsim/weights/MODEL_CARD.md): PROCS=2 BATCH=4 LR=5e-4 STAGE1_EPOCHS=12 FINETUNE_EPOCHS=4
+# STAGE2_EPOCHS=0 REMESH=2 MIRROR=1 PAIR=1 (shipped from $OUT/finetune/best).
+# v0.5: PROCS=1 BATCH=8 LR=5e-4 STAGE1_EPOCHS=30 STAGE2_EPOCHS=0 REMESH=2 (and PAIR=2:
 # the paired-fabric candidate of docs/studies/pair_loss.md, not shipped).
 # Then ship: .venv/bin/python -c "from garsim.model.garsim import GarSimModel;
-#   GarSimModel.load('$OUT/stage1/best').save('garsim/weights')"   (stage2/best when stage 2 ran)
+#   GarSimModel.load('$OUT/stage1/best').save('garsim/weights')"   (finetune/ or stage2/best when they ran)
 set -euo pipefail
 cd "$(dirname "$0")/.."
-DATA=${DATA:-~/garsim-data/v3}
+DATA=${DATA:-~/garsim-data/v4}
 OUT=${OUT:-~/garsim-runs/v1}
 PROCS=${PROCS:-2}
 export OMP_NUM_THREADS=1
@@ -35,8 +40,15 @@ if [ "${MIRROR:-0}" = 1 ]; then MIRROR_FLAG=(--mirror); fi
 "${TRAIN[@]}" --out "$OUT/stage1" --resolution low --epochs "$EPOCHS1" --lr "${LR:-1e-3}" --head displacement \
   --collision-start $((EPOCHS1 * 2 / 3)) --remesh-copies "${REMESH:-0}" \
   "${MIRROR_FLAG[@]}"
+LAST="$OUT/stage1"
+EPOCHS_FT=${FINETUNE_EPOCHS:-0}
+if [ "$EPOCHS_FT" -gt 0 ]; then
+  "${TRAIN[@]}" --out "$OUT/finetune" --resolution low --epochs "$EPOCHS_FT" --lr "${FINETUNE_LR:-2e-4}" \
+    --head displacement --collision-start 0 --remesh-copies "${REMESH:-0}" "${MIRROR_FLAG[@]}" --init "$LAST/best"
+  LAST="$OUT/finetune"
+fi
 EPOCHS2=${STAGE2_EPOCHS:-40}
 if [ "$EPOCHS2" -gt 0 ]; then
   "${TRAIN[@]}" --out "$OUT/stage2" --resolution both --epochs "$EPOCHS2" --lr 3e-4 --collision-start 0 \
-    --init "$OUT/stage1/best"
+    --init "$LAST/best"
 fi
