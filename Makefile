@@ -1,6 +1,8 @@
 # One venv, torch CPU first (any other torch spec pulls a multi-GB CUDA build), then the package.
 PYTHON ?= python3
 VENV := .venv
+# Where pip has no local CPU wheel of torch: make setup TORCH_PIP_ARGS='--index-url https://download.pytorch.org/whl/cpu'
+TORCH_PIP_ARGS ?=
 STAMP := $(VENV)/.installed
 
 .PHONY: setup demo lint test test-all results
@@ -8,7 +10,7 @@ STAMP := $(VENV)/.installed
 $(STAMP): pyproject.toml
 	test -d $(VENV) || $(PYTHON) -m venv $(VENV)
 	$(VENV)/bin/pip install -q --upgrade pip
-	$(VENV)/bin/pip install -q torch==2.13.0
+	$(VENV)/bin/pip install -q $(TORCH_PIP_ARGS) torch==2.13.0
 	$(VENV)/bin/pip install -q -e '.[sim,test]'
 	touch $(STAMP)
 

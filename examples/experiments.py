@@ -1,12 +1,13 @@
 """The paper's experiments on a generated dataset, one command each (``garsim.eval.studies``): every variant is
 trained under one protocol (data, split, schedule, seed) and scored per garment family on the test split.
 
-    .venv/bin/python examples/experiments.py heads --data ~/garsim-data/v3 --out runs/studies --budget 30
-    .venv/bin/python examples/experiments.py baselines --data ~/garsim-data/v3 --out runs/studies --budget 30
-    .venv/bin/python examples/experiments.py generalisation --data ~/garsim-data/v3 --out runs/studies --budget 30
-    .venv/bin/python examples/experiments.py resolution --data ~/garsim-data/v3 --out runs/studies --budget 30
-    .venv/bin/python examples/experiments.py scaling --data ~/garsim-data/v3 --out runs/studies --budget 30
-    .venv/bin/python examples/experiments.py corrections --data ~/garsim-data/v3 --out runs/studies --model DIR
+    ARGS="--data ~/garsim-data/v4 --test-data ~/garsim-data/v4test --out runs/studies"
+    .venv/bin/python examples/experiments.py heads $ARGS --budget 30
+    .venv/bin/python examples/experiments.py baselines $ARGS --budget 30
+    .venv/bin/python examples/experiments.py generalisation $ARGS --budget 30
+    .venv/bin/python examples/experiments.py resolution $ARGS --budget 30
+    .venv/bin/python examples/experiments.py scaling $ARGS --budget 30
+    .venv/bin/python examples/experiments.py corrections $ARGS --model DIR
 
 Each writes <out>/<study>.json and <out>/<study>.md (its tables, headed by the command). Trained models go to
 <out>/models/<key>/, keyed by what decides them, so a variant several studies share (the base model trained on
@@ -46,6 +47,7 @@ def parser() -> argparse.ArgumentParser:
     """The driver's arguments: the protocol's options, then one subcommand per study."""
     common = argparse.ArgumentParser(add_help=False)
     common.add_argument("--data", required=True, help="dataset folder made by `garsim data generate`")
+    common.add_argument("--test-data", help="dataset folder of the scored split (default: --data)")
     common.add_argument("--out", required=True, help="study folder: results, models/, figures")
     common.add_argument("--budget", type=int, default=TrainConfig.epochs, help="training epochs of every variant")
     common.add_argument("--max-steps", type=int, help="cap on optimizer steps per epoch (smoke runs)")
@@ -94,7 +96,9 @@ def study_config(args: argparse.Namespace) -> studies.StudyConfig:
         progress=not args.quiet,
     )
     model = GarSimConfig.from_json(args.config) if args.config else GarSimConfig()
-    return studies.StudyConfig(args.data, train, model, split=args.split, val_every=args.val_every)
+    return studies.StudyConfig(
+        args.data, train, model, split=args.split, val_every=args.val_every, test_data=args.test_data
+    )
 
 
 def run(args: argparse.Namespace) -> tuple[dict[str, Any], list[str]]:

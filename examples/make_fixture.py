@@ -1,5 +1,6 @@
-"""Export the committed test fixture (a few MB) from generated v2 datasets: from the test store one low-resolution
-record per garment family and construction, every canonical pose and fabric, and one complete paired-fabric group;
+"""Export the committed test fixture (a few MB) from generated datasets (v4 for training, v4test for testing):
+from the test store one low-resolution record per garment family and construction, every canonical pose and
+fabric, and one complete paired-fabric group;
 from the training store one record of each of four families (skirt, t-shirt, trousers, dress: a few training jobs
 for the trainer's and the studies' tests, no top so that a family stays unseen); last settled state of each.
 

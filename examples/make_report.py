@@ -3,7 +3,7 @@ or missed (``garsim.eval.goals``), the training curve, the test / ood tables of 
 paired-fabric agreement, the external check (API defaults and raw network, from check.py --json), the speed bench,
 error maps of test samples (prior, prediction, ground truth) and an index of the studies in docs/studies/.
 
-Run: .venv/bin/python examples/make_report.py --run ~/garsim-runs/v1 --data ~/garsim-data/v3 \
+Run: .venv/bin/python examples/make_report.py --run ~/garsim-runs/v1 --data ~/garsim-data/v4test \
     --results docs/results.json --external-default docs/external_default.json \
     --external-raw docs/external_raw.json --bench docs/bench.json
 """
@@ -130,7 +130,8 @@ def main() -> None:
         parts.append("## External check set (`../shared/external-eval/check.py`)\n" + _external_table(external))
     if bench:
         parts.append(
-            f"## Speed\n`garsim bench --out {args.bench}` (table and plot: `bench.md`, `bench.png`): "
+            f"## Speed\n`OMP_NUM_THREADS=1 garsim bench --model garsim/weights --sizes 600 2400 10000 40000 "
+            f"--out {args.bench}` (table and plot: `bench.md`, `bench.png`): "
             + ", ".join(f"{g.name} {g.value:.1f} ms" for g in speed_goals(bench) if g.value is not None)
             + "."
         )

@@ -11,7 +11,7 @@ the refinement does not make the drape worse. The refinement's bounds (max <= 1.
 edges through <= 0.2 %) are what it enforces: these figures check the refinement, not the network.
 
 Usage: python examples/refine_accept.py [--model DIR] [--external ../shared/external-eval/data]
-       [--data ~/garsim-data/v3 --split test --resolution full] [--out docs/refine_accept.json]
+       [--data ~/garsim-data/v4test --split test --resolution full] [--out docs/refine_accept.json]
 """
 
 from __future__ import annotations

@@ -1,10 +1,10 @@
 """How well the learned correction carries across resolutions (the API's ``max_vertices`` path).
 
-On the test split at full resolution (800 v), compare the network run on the garment itself with
-the network run on a ~4x decimated copy whose correction is carried back barycentrically (what
+On the test split at full resolution (the stored garment, 300-2,500 vertices), compare the network run on
+the garment itself with the network run on a ~4x decimated copy whose correction is carried back barycentrically (what
 ``GarSim`` does for garments denser than ``max_vertices``), and the prior. Errors against Newton.
 
-Run: .venv/bin/python examples/resolution_transfer.py --data ~/garsim-data/v1 --out docs/results_resolution.json
+Run: .venv/bin/python examples/resolution_transfer.py --data ~/garsim-data/v4test --out docs/results_resolution.json
 """
 
 from __future__ import annotations
@@ -35,7 +35,7 @@ def main() -> None:
     args = parser.parse_args()
     model = (GarSim.load(args.model) if args.model else GarSim.pretrained()).model
     methods = {
-        "network at 800 v": GarSim(model, collision_margin=None, max_vertices=None),
+        "network at full resolution": GarSim(model, collision_margin=None, max_vertices=None),
         **{
             f"network at {c} v, carried back": GarSim(model, collision_margin=None, max_vertices=c) for c in args.coarse
         },

@@ -144,6 +144,18 @@ def test_driver_corrections(driver, driver_args):
     assert "corrections/" in (folder / "corrections.md").read_text()
 
 
+def test_driver_scores_the_test_data_folder(driver, driver_args, tmp_path):
+    """--test-data: the scored split comes from that folder (--data, the training folder, is not read)."""
+    folder, args = driver_args
+    trained = next((folder / "models").iterdir()) / "best"
+    args = [a if a != str(FIXTURE) else str(tmp_path / "absent") for a in args]
+    args = [*args, "--test-data", str(FIXTURE), "--model", str(trained), "--size", "64"]
+    args[args.index("--out") + 1] = str(tmp_path)
+    assert driver.main(["corrections", *args]) == 0
+    rows = json.loads((tmp_path / "corrections.json").read_text())["samples"]
+    assert {r["garment"] for r in rows} == TEST_FAMILIES - {"all"}
+
+
 def test_baselines_table3_trains_the_deepsd_style_baseline_under_the_same_protocol(tmp_path):
     out = deepsd_comparison(
         _study(tmp_path), resolutions=("low",)

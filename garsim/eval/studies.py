@@ -60,6 +60,12 @@ class StudyConfig:
     split: str = "test"
     resolution: str = "low"
     val_every: int = 10
+    test_data: str | None = None  # the folder of the scored split, when not ``data`` (e.g. v4 trains, v4test scores)
+
+    @property
+    def scored_data(self) -> str:
+        """The dataset folder whose ``split`` is scored."""
+        return self.test_data or self.data
 
     def to_dict(self) -> dict[str, Any]:
         """Plain JSON dict (recorded beside every study's results)."""
@@ -116,10 +122,10 @@ def _study(study: StudyConfig, variants: dict[str, dict[str, Any]]) -> dict[str,
     for label, kwargs in variants.items():
         model, models[label] = train_variant(study, **kwargs)
         scored = evaluate_split(
-            model, study.data, study.split, study.resolution, collision_margin=None, name=label, baselines=False
+            model, study.scored_data, study.split, study.resolution, collision_margin=None, name=label, baselines=False
         )
         results[label] = scored[label]
-    results.update(evaluate_split(None, study.data, study.split, study.resolution))
+    results.update(evaluate_split(None, study.scored_data, study.split, study.resolution))
     return {"protocol": study.to_dict(), "models": models, "results": results}
 
 
@@ -143,10 +149,10 @@ def deepsd_comparison(study: StudyConfig, resolutions: Sequence[str] = ("low", "
     for res in resolutions:
         for label, (model, _) in trained.items():
             scored = evaluate_split(
-                model, study.data, study.split, res, collision_margin=None, name=label, baselines=False
+                model, study.scored_data, study.split, res, collision_margin=None, name=label, baselines=False
             )
             results[f"{label} @ {res}"] = scored[label]
-        for method, per in evaluate_split(None, study.data, study.split, res).items():
+        for method, per in evaluate_split(None, study.scored_data, study.split, res).items():
             results[f"{method} @ {res}"] = per
     ratio = {
         res: {
@@ -234,7 +240,7 @@ def resolution_study(study: StudyConfig, model: Any, factors: Sequence[int] = FA
     samples: dict[int, list[Sample]] = defaultdict(list)
     preds: dict[int, dict[str, list[np.ndarray]]] = defaultdict(lambda: defaultdict(list))
     linear: dict[int, list[float]] = defaultdict(list)
-    for rec in DatasetStore(study.data).sequences(study.split):
+    for rec in DatasetStore(study.scored_data).sequences(study.split):
         low = len(rec.levels["low"].template)
         coarse = GarSim(model, collision_margin=None, refine=False, max_vertices=max(100, low))
         for f, level in resolution_levels(rec, factors).items():
@@ -245,7 +251,7 @@ def resolution_study(study: StudyConfig, model: Any, factors: Sequence[int] = FA
                 preds[f]["prior"].append(s.prior)
                 linear[f].append(float(np.sqrt(len(s.garment) / low)))
     if not samples:
-        raise ValueError(f"{study.data}: no {study.split!r} sequences to score")
+        raise ValueError(f"{study.scored_data}: no {study.split!r} sequences to score")
     results: Results = {}
     for f in factors:
         for method, per_family in score_predictions(samples[f], preds[f]).items():
@@ -266,7 +272,7 @@ def corrections(study: StudyConfig, model: Any, per_family: int = 1, size: int =
     simulator's own correction |G_sim − G^prior| on the same scale (left: network, right: simulation); one PNG
     per sample under ``out_dir/corrections`` and the mean and max of both."""
     by_family: dict[str, list[Sample]] = defaultdict(list)
-    for s in DatasetStore(study.data).samples(study.split, study.resolution):
+    for s in DatasetStore(study.scored_data).samples(study.split, study.resolution):
         by_family[s.garment_type].append(s)
     rng = np.random.default_rng(study.train.seed)
     folder = Path(study.train.out_dir) / "corrections"

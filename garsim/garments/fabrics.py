@@ -27,9 +27,9 @@ Membrane stiffness barely changes a drape under self-weight (strain ~1e-4 for an
 N/m, measured): it is kept high enough that VBD holds the stretch check (edges <= 1.5x rest).
 
 Measured (tests/test_physics_newton_sim.py, a 400-vertex flared skirt settled once in cotton, then held
-in each preset until its speed fell below 5 mm/s): mean distance to the body 44.0 / 44.0 / 44.4 / 46.0 mm
-and mean fold angle 21.7 / 21.7 / 21.2 / 19.4 degrees, silk to leather. With real bending values the
-light fabrics differ in their folds (on a fine mesh), the stiff ones a little in their silhouette.
+in each preset until its mean speed fell below ``SimConfig.settle_speed`` = 2 cm/s): mean distance to the
+body 44.3 / 44.3 / 44.4 / 46.3 mm, silk to leather, and the mean fold angle strictly decreasing. With real
+bending values the light fabrics differ in their folds (on a fine mesh), the stiff ones a little in their silhouette.
 """
 
 from __future__ import annotations

@@ -1,6 +1,6 @@
 """Resumable, parallel dataset generation (ground truth v2): settled drapes of six garment families
 from two independent constructions, on Anny bodies in T-, A- and in-between canonical poses, moved
-through chains of everyday and wider target poses, in preset, paired and physically sampled fabrics.
+to everyday or wider target poses (one per job by default), in preset, paired and physically sampled fabrics.
 
 One job = one garment instance (family, construction, parameters, resolution) on one body:
 build it on the T-pose body, skin it to the job's canonical pose, settle it there (the template),

@@ -1,4 +1,4 @@
-"""Ground-truth cloth simulation with Newton's VBD solver (CPU): settle, move the body, reject.
+"""Ground-truth cloth simulation with Newton's VBD solver (CPU or CUDA): settle, move the body, reject.
 
 ``settle`` drapes a template garment on the canonical body under gravity (pinned vertices held)
 until the garment's mean speed falls below a threshold; this gives the paper's template G.
