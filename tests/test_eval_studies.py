@@ -146,12 +146,13 @@ def test_driver_corrections(driver, driver_args):
 
 def test_driver_scores_the_test_data_folder(driver, driver_args, tmp_path):
     """--test-data: the scored split comes from that folder (--data, the training folder, is not read)."""
-    folder, args = driver_args
-    trained = next((folder / "models").iterdir()) / "best"
+    _, args = driver_args
+    trained = train_variant(_study(tmp_path / "base"))[1]["dir"]  # this test's own model: independent of the others
     args = [a if a != str(FIXTURE) else str(tmp_path / "absent") for a in args]
-    args = [*args, "--test-data", str(FIXTURE), "--model", str(trained), "--size", "64"]
+    args = [*args, "--test-data", str(FIXTURE), "--model", trained, "--size", "64"]
     args[args.index("--out") + 1] = str(tmp_path)
     assert driver.main(["corrections", *args]) == 0
+    assert not (tmp_path / "absent").exists()
     rows = json.loads((tmp_path / "corrections.json").read_text())["samples"]
     assert {r["garment"] for r in rows} == TEST_FAMILIES - {"all"}
 
