@@ -133,6 +133,7 @@ class GenerateConfig:
         for key in ("out", "num_train", "num_test", "num_ood", "workers", "shard", "limit"):
             d.pop(key)
         sim = asdict(SimConfig(**self.sim))  # the effective simulator settings, defaults included
+        sim.pop("graphs")  # how frames are launched, not what they compute (bit-identical either way)
         for key, legacy in OPTIONAL_SIM_SETTINGS.items():  # added later: folders made before them still match
             if key in sim and sim[key] == legacy:
                 sim.pop(key)

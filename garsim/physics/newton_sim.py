@@ -76,6 +76,10 @@ class SimConfig:
     crop_margin: float | None = 0.06  # m: collide only with body faces this close to the garment's box (at any frame)
     abort_stretch: float = 3.0  # stop early when any edge exceeds this multiple of its rest length
     device: str = "auto"  # warp device: "auto" = the first CUDA device when present, else "cpu"
+    # Capture each kind of substep once as a Warp graph and replay it (in C++ on the CPU, a CUDA graph on a GPU):
+    # the same kernels with the same arguments, bit-identical to launching them one by one, without ~100 us of
+    # Python per launch (docs/studies/generator_profile.md). How frames are launched, not what they compute.
+    graphs: bool = True
 
     def __post_init__(self) -> None:
         if self.fps <= 0 or self.substeps < 1 or self.iterations < 1:
@@ -236,6 +240,10 @@ class ClothScene:
         self.body_points = self.body_mesh.mesh.points
         self.damping = config.damping
         self.substeps_done = 0
+        self._wp = wp
+        self._pin_targets = wp.zeros(max(len(self.pinned_idx), 1), dtype=wp.vec3, device=device)
+        self._pin_index = wp.array(self.all_pinned.astype(np.int32), dtype=wp.int32, device=device)
+        self._graphs: dict[tuple[Any, ...], tuple[Any, Any, Any]] = {}
 
     def settling(self, on: bool) -> None:
         """Switch between the motion settings and the settling ones (``settle_iterations``, ``settle_damping``)."""
@@ -250,21 +258,21 @@ class ClothScene:
         return self.state_0.particle_q.numpy().reshape(self.copies, self.num_particles, 3).copy()
 
     def set_body(self, vertices: np.ndarray) -> None:
+        """Move the body to ``vertices`` (Vb, 3) and refit its collision tree (on the host: Warp's CPU graphs do
+        not record a mesh refit, so it stays outside them)."""
         self.body_points.assign(np.ascontiguousarray(vertices, dtype=np.float32))
         self.body_mesh.mesh.refit()
 
-    def set_pins(self, targets: np.ndarray) -> None:
-        """Put the pinned vertices of every copy on ``targets`` (Np, 3), at rest."""
-        if len(self.pinned_idx):
-            q = self.state_0.particle_q.numpy()
-            q[self.all_pinned] = np.tile(targets, (self.copies, 1))
-            qd = self.state_0.particle_qd.numpy()
-            qd[self.all_pinned] = 0.0
-            self.state_0.particle_q.assign(q)
-            self.state_0.particle_qd.assign(qd)
+    def _launch_substep(self, place_pins: bool) -> None:
+        """Launch one substep's operations (every one a Warp operation, so that they can be captured)."""
+        from garsim.physics.scene_kernels import place_pins as place_pins_kernel
+        from garsim.physics.scene_kernels import scale_vec3
 
-    def substep(self) -> None:
-        cfg = self.config
+        wp, cfg, device = self._wp, self.config, self.model.device
+        if place_pins and len(self.all_pinned):
+            q, qd = self.state_0.particle_q, self.state_0.particle_qd
+            inputs = [self._pin_targets, self._pin_index, len(self.pinned_idx), q, qd]
+            wp.launch(place_pins_kernel, len(self.all_pinned), inputs, device=device)
         self.state_0.clear_forces()
         if self.substeps_done % cfg.collide_every == 0:
             self.pipeline.collide(self.state_0, self.contacts)
@@ -272,12 +280,43 @@ class ClothScene:
         self.solver.step(self.state_0, self.state_1, self.control, self.contacts, cfg.dt)
         self.state_0, self.state_1 = self.state_1, self.state_0
         if self.damping < 1.0:
-            qd = self.state_0.particle_qd.numpy()
-            qd *= self.damping
-            self.state_0.particle_qd.assign(qd)
+            qd = self.state_0.particle_qd
+            wp.launch(scale_vec3, qd.shape[0], [qd, self.damping], device=device)
+
+    def substep(self, body: np.ndarray | None = None, pins: np.ndarray | None = None) -> None:
+        """One VBD substep; ``body`` (Vb, 3) moves the body first, ``pins`` (Np, 3) puts the pinned vertices of
+        every copy there, at rest. With ``config.graphs`` each kind of substep is captured once and replayed."""
+        if body is not None:
+            self.set_body(body)
+        if pins is not None and len(self.pinned_idx):
+            self._pin_targets.assign(np.ascontiguousarray(pins, dtype=np.float32).reshape(len(self.pinned_idx), 3))
+        if not self.config.graphs:
+            self._launch_substep(pins is not None)
+            return
+        wp, device = self._wp, self.model.device
+        # everything the recorded launches depend on: pin placement, the collision phase, the solver and damping
+        # settings, and which state buffer holds the current state (every substep swaps them)
+        key = (
+            pins is not None,
+            self.substeps_done % self.config.collide_every,
+            self.solver.iterations,
+            self.damping,
+            id(self.state_0),
+        )
+        if key not in self._graphs:
+            wp.capture_begin(device=device)  # records the launches, runs none of them
+            try:
+                self._launch_substep(pins is not None)
+            finally:
+                graph = wp.capture_end(device=device)
+            self._graphs[key] = (graph, self.state_0, self.state_1)
+            self.substeps_done -= 1  # the recording advanced the counter; the replay below does
+        graph, self.state_0, self.state_1 = self._graphs[key]
+        self.substeps_done += 1
+        wp.capture_launch(graph)
 
     def frame(self) -> np.ndarray:
-        """Step one frame (``substeps`` substeps) and return (C, N, 3) positions."""
+        """Step one frame (``substeps`` substeps, body and pins held) and return (C, N, 3) positions."""
         for _ in range(self.config.substeps):
             self.substep()
         return self.positions()
@@ -441,9 +480,7 @@ def simulate_poses(
             bodies = (1.0 - weights) * body[j - 1] + weights * body[j]
             ptarget = (1.0 - weights) * pin[j - 1] + weights * pin[j]
             for i in range(s):
-                scene.set_body(bodies[i])
-                scene.set_pins(ptarget[i])
-                scene.substep()
+                scene.substep(bodies[i], ptarget[i])
             aborted = _abort_reason(scene.positions(), edges, rest, config)
             if aborted:
                 break
