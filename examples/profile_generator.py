@@ -1,5 +1,7 @@
-"""Where a generator job's CPU goes: total CPU seconds, Warp kernel launches, and the share spent inside the kernels
-against the Python side of launching them (argument packing, Newton's solver and collision glue, our own loop).
+"""Where a generator job's CPU goes, launching every kernel from Python and replaying captured substep graphs:
+total CPU seconds, Warp kernel launches made from Python, and the share spent inside them against the Python side of
+launching them (argument packing, Newton's solver and collision glue, our own loop); the two runs' results must be
+bit-identical.
 
 Run: .venv/bin/python examples/profile_generator.py --family tshirt --json docs/studies/generator_profile/tshirt.json
      .venv/bin/python examples/profile_generator.py --family skirt --paired
@@ -13,6 +15,8 @@ import argparse
 import json
 import tempfile
 import time
+from collections import Counter
+from dataclasses import replace
 from pathlib import Path
 
 from garsim.atomic import atomic_write_bytes
@@ -27,6 +31,7 @@ def main() -> None:
     parser.add_argument("--json", type=Path, help="write the figures here")
     args = parser.parse_args()
 
+    import numpy as np
     import warp._src.context as warp_context
 
     with tempfile.TemporaryDirectory() as out:
@@ -35,44 +40,71 @@ def main() -> None:
         if not jobs:
             raise SystemExit(f"no {'paired ' if args.paired else ''}{args.family} job among the first 60 planned")
         job = jobs[0]
-        simulate_job(job, config)  # load / compile every kernel
+        simulate_job(job, replace(config, sim={"graphs": True}))  # load / compile every kernel
 
         invoke = warp_context.invoke
         counter = {"launches": 0, "kernel_cpu": 0.0}
+        per_kernel: Counter[str] = Counter()
 
-        def timed_invoke(*a, **k):  # type: ignore[no-untyped-def]
+        def timed_invoke(kernel, *a, **k):  # type: ignore[no-untyped-def]
             c = time.process_time()
             try:
-                return invoke(*a, **k)
+                return invoke(kernel, *a, **k)
             finally:
-                counter["kernel_cpu"] += time.process_time() - c
+                dt = time.process_time() - c
+                counter["kernel_cpu"] += dt
                 counter["launches"] += 1
+                per_kernel[kernel.key] += dt
 
+        runs, states = {}, {}
         warp_context.invoke = timed_invoke
         try:
-            c0 = time.process_time()
-            records, rejections = simulate_job(job, config)
-            total = time.process_time() - c0
+            for graphs in (False, True):
+                counter.update(launches=0, kernel_cpu=0.0)
+                per_kernel.clear()
+                c0 = time.process_time()
+                records, rejections = simulate_job(job, replace(config, sim={"graphs": graphs}))
+                total = time.process_time() - c0
+                settled = sum(int(sum(r.meta["settled"])) for r in records)
+                states[graphs] = [r.levels["full"].targets for r in records]
+                runs["graphs" if graphs else "one_by_one"] = {
+                    "cpu_seconds": round(total, 2),
+                    "cpu_seconds_per_settled_sample": round(total / max(settled, 1), 2),
+                    "python_kernel_launches": counter["launches"],
+                    "kernel_cpu_seconds": round(counter["kernel_cpu"], 2) if not graphs else None,
+                    "outside_kernels_share": round(1.0 - counter["kernel_cpu"] / total, 3) if not graphs else None,
+                    "python_us_per_launch": round(
+                        1e6 * (total - counter["kernel_cpu"]) / max(counter["launches"], 1), 1
+                    )
+                    if not graphs
+                    else None,
+                }
+                if not graphs:
+                    runs["one_by_one"]["top_kernels_cpu_seconds"] = {
+                        key: round(t, 2) for key, t in per_kernel.most_common(8)
+                    }
         finally:
             warp_context.invoke = invoke
-    settled = sum(int(sum(r.meta["settled"])) for r in records)
+    identical = len(states[False]) == len(states[True]) and all(
+        np.array_equal(a, b) for a, b in zip(states[False], states[True])
+    )
     result = {
         "job": job.job_id,
         "family": job.family,
         "construction": job.construction,
+        "vertices": job.vertices,
         "copies": len(job.fabrics),
         "settled_samples": settled,
         "rejections": len(rejections),
-        "cpu_seconds": round(total, 2),
-        "cpu_seconds_per_settled_sample": round(total / max(settled, 1), 2),
-        "kernel_launches": counter["launches"],
-        "kernel_cpu_seconds": round(counter["kernel_cpu"], 2),
-        "outside_kernels_share": round(1.0 - counter["kernel_cpu"] / total, 3),
-        "python_us_per_launch": round(1e6 * (total - counter["kernel_cpu"]) / max(counter["launches"], 1), 1),
+        **runs,
+        "cpu_ratio_one_by_one_over_graphs": round(runs["one_by_one"]["cpu_seconds"] / runs["graphs"]["cpu_seconds"], 2),
+        "bit_identical": identical,
     }
     print(json.dumps(result, indent=1))
     if args.json:
         atomic_write_bytes(args.json, json.dumps(result, indent=1).encode())
+    if not identical:
+        raise SystemExit("the graph replay changed the result: do not generate with graphs")
 
 
 if __name__ == "__main__":

@@ -4,6 +4,7 @@ import signal
 import subprocess
 import sys
 import time
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -315,6 +316,7 @@ def test_settings_added_later_keep_older_folders_and_workers_refuse_changed_defa
     assert not set(legacy) & set(cfg.settings()["sim"])
     gen.check_settings(cfg)  # binds the folder
     gen.check_settings(cfg)  # and matches again
+    gen.check_settings(replace(cfg, sim={**legacy, "graphs": False}))  # how frames are launched is not a setting
     with pytest.raises(ValueError, match="sim"):
         gen.check_settings(GenerateConfig(out=tmp_path, num_train=1, sim={**legacy, "collide_every": 3}))
     monkeypatch.setattr(gen, "simulate_job", lambda job, config: pytest.fail("must not simulate"))
