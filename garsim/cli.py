@@ -447,6 +447,7 @@ def cmd_data_generate(args: argparse.Namespace) -> int:
         workers=args.workers,
         shard=args.shard,
         limit=args.limit,
+        sim={"graphs": False} if args.no_graphs else {},
         **{k: v for k, v in given.items() if v is not None},
     )
     summary = generate(cfg, progress=not args.quiet)
@@ -938,6 +939,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--workers", type=int, default=2, help="parallel simulation processes")
     p.add_argument("--shard", type=_shard, default=(0, 1), help="K/N: run every N-th job from K")
     p.add_argument("--limit", type=int, help="stop after this many jobs (smoke runs)")
+    p.add_argument(
+        "--no-graphs",
+        action="store_true",
+        help="launch every kernel from Python instead of replaying captured substeps (same results, slower)",
+    )
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=cmd_data_generate)
     p = command("info", "counts per split / family / fabric / pose, acceptance, cost, ranges", data)

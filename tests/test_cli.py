@@ -79,6 +79,21 @@ def test_errors_are_reported_not_raised(tmp_path, capsys):
         build_parser().parse_args(["data", "generate", "--out", "x", "--shard", "3/2"])
 
 
+def test_data_generate_passes_its_settings(tmp_path, monkeypatch, capsys):
+    """``garsim data generate`` hands the counts, the shard and ``--no-graphs`` to the generator's config."""
+    import garsim.physics.generate as gen
+
+    seen = []
+    monkeypatch.setattr(gen, "generate", lambda cfg, progress: seen.append(cfg) or {"seconds": []})
+    out = str(tmp_path / "d")
+    assert main(["data", "generate", "--out", out, "--train", "3", "--shard", "1/2", "--no-graphs", "--quiet"]) == 0
+    assert main(["data", "generate", "--out", out, "--quiet"]) == 0
+    (a, b) = seen
+    assert (a.num_train, a.shard, a.sim) == (3, (1, 2), {"graphs": False}) and b.sim == {}
+    assert b.num_train == gen.GenerateConfig.num_train and a.settings() == b.settings()
+    assert '"seconds"' not in capsys.readouterr().out
+
+
 def test_demo(tmp_path, capsys):
     """The demo end to end on tiny settings (~15 s): every family on both bodies, the grid, the walk animation."""
     import struct
