@@ -1,7 +1,8 @@
-"""Where a generator job's CPU goes, launching every kernel from Python and replaying captured substep graphs:
-total CPU seconds, Warp kernel launches made from Python, and the share spent inside them against the Python side of
-launching them (argument packing, Newton's solver and collision glue, our own loop); the two runs' results must be
-bit-identical.
+"""Where a generator job's CPU goes, before (every kernel launched from Python, Newton's full-size contact buffer)
+and after (captured substep graphs replayed, the tight contact buffer: ``SimConfig.graphs``, ``tight_contacts``):
+total CPU seconds, Warp kernel launches made from Python, the share spent inside them against the Python side of
+launching them (argument packing, Newton's solver and collision glue, our own loop) and the costliest kernels; the
+two runs' results must be bit-identical.
 
 Run: .venv/bin/python examples/profile_generator.py --family tshirt --json docs/studies/generator_profile/tshirt.json
      .venv/bin/python examples/profile_generator.py --family skirt --paired
@@ -40,7 +41,7 @@ def main() -> None:
         if not jobs:
             raise SystemExit(f"no {'paired ' if args.paired else ''}{args.family} job among the first 60 planned")
         job = jobs[0]
-        simulate_job(job, replace(config, sim={"graphs": True}))  # load / compile every kernel
+        simulate_job(job, config)  # load / compile every kernel
 
         invoke = warp_context.invoke
         counter = {"launches": 0, "kernel_cpu": 0.0}
@@ -59,28 +60,30 @@ def main() -> None:
         runs, states = {}, {}
         warp_context.invoke = timed_invoke
         try:
-            for graphs in (False, True):
+            for after in (False, True):
                 counter.update(launches=0, kernel_cpu=0.0)
                 per_kernel.clear()
                 c0 = time.process_time()
-                records, rejections = simulate_job(job, replace(config, sim={"graphs": graphs}))
+                sim = {"graphs": after, "tight_contacts": after}
+                records, rejections = simulate_job(job, replace(config, sim=sim))
                 total = time.process_time() - c0
                 settled = sum(int(sum(r.meta["settled"])) for r in records)
-                states[graphs] = [r.levels["full"].targets for r in records]
-                runs["graphs" if graphs else "one_by_one"] = {
+                states[after] = [r.levels["full"].targets for r in records]
+                runs["after" if after else "before"] = {
+                    "sim": sim,
                     "cpu_seconds": round(total, 2),
                     "cpu_seconds_per_settled_sample": round(total / max(settled, 1), 2),
                     "python_kernel_launches": counter["launches"],
-                    "kernel_cpu_seconds": round(counter["kernel_cpu"], 2) if not graphs else None,
-                    "outside_kernels_share": round(1.0 - counter["kernel_cpu"] / total, 3) if not graphs else None,
+                    "kernel_cpu_seconds": round(counter["kernel_cpu"], 2) if not after else None,
+                    "outside_kernels_share": round(1.0 - counter["kernel_cpu"] / total, 3) if not after else None,
                     "python_us_per_launch": round(
                         1e6 * (total - counter["kernel_cpu"]) / max(counter["launches"], 1), 1
                     )
-                    if not graphs
+                    if not after
                     else None,
                 }
-                if not graphs:
-                    runs["one_by_one"]["top_kernels_cpu_seconds"] = {
+                if not after:
+                    runs["before"]["top_kernels_cpu_seconds"] = {
                         key: round(t, 2) for key, t in per_kernel.most_common(8)
                     }
         finally:
@@ -97,14 +100,14 @@ def main() -> None:
         "settled_samples": settled,
         "rejections": len(rejections),
         **runs,
-        "cpu_ratio_one_by_one_over_graphs": round(runs["one_by_one"]["cpu_seconds"] / runs["graphs"]["cpu_seconds"], 2),
+        "cpu_ratio_before_over_after": round(runs["before"]["cpu_seconds"] / runs["after"]["cpu_seconds"], 2),
         "bit_identical": identical,
     }
     print(json.dumps(result, indent=1))
     if args.json:
         atomic_write_bytes(args.json, json.dumps(result, indent=1).encode())
     if not identical:
-        raise SystemExit("the graph replay changed the result: do not generate with graphs")
+        raise SystemExit("graphs or the tight contact buffer changed the result: do not generate with them")
 
 
 if __name__ == "__main__":

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import logging
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -280,10 +281,12 @@ def test_settling_phase_switches_iterations_and_damping_and_collision_runs_every
         SimConfig(settle_damping=0.0)
 
 
-def test_graph_replay_is_bit_identical_to_launching_one_by_one(icosphere):
+def test_graph_replay_and_tight_contacts_are_bit_identical_to_launching_one_by_one(icosphere):
     """Two fabric copies of a patch with two pinned vertices, a moving sphere and moving pins, damping, collision
     every 2nd of 3 substeps (the state buffers swap parity every frame), then settling settings: replaying the
-    captured substeps gives exactly the positions of launching every kernel, and each kind is captured once."""
+    captured substeps with the tight contact buffer gives exactly the positions of launching every kernel with
+    Newton's full-size buffer, and each kind of substep is captured once."""
+    from garsim.physics import newton_sim
     from garsim.physics.newton_sim import ClothScene
 
     v, f = _grid_patch(5, z=1.04)
@@ -291,7 +294,7 @@ def test_graph_replay_is_bit_identical_to_launching_one_by_one(icosphere):
     pinned[[0, 4]] = True
     bv, bf = icosphere
     results = []
-    for graphs in (False, True):
+    for fast in (False, True):
         cfg = SimConfig(
             substeps=3,
             iterations=2,
@@ -299,7 +302,8 @@ def test_graph_replay_is_bit_identical_to_launching_one_by_one(icosphere):
             settle_damping=0.8,
             settle_iterations=3,
             collide_every=2,
-            graphs=graphs,
+            graphs=fast,
+            tight_contacts=fast,
         )
         scene = ClothScene(v, f, pinned, bv, bf, ["silk", "leather"], cfg)
         trace = []
@@ -313,9 +317,37 @@ def test_graph_replay_is_bit_identical_to_launching_one_by_one(icosphere):
         scene.settling(False)
         trace.append(scene.frame())
         results.append(np.stack(trace))
-        if graphs:
+        assert int(scene._most_contacts.numpy()[0]) > 10  # the patch lies on the sphere
+        if fast:
             assert 0 < len(scene._graphs) <= 8 < 6 * cfg.substeps  # reused: (pins, phase, settings, buffer) kinds
+            assert scene.contacts.soft_contact_max == scene.contact_capacity == newton_sim.MIN_CONTACT_CAPACITY
+        else:
+            assert scene.contact_capacity is None
     eager, replayed = results
     assert np.isfinite(eager).all() and np.abs(eager[-1] - v).max() > 0.01  # the cloth moved
     assert np.allclose(eager[3][:, pinned], v[pinned] + [0.002 * 11, 0.0, 0.0], atol=1e-6)  # pins on target
     assert np.array_equal(eager, replayed)
+
+
+def test_an_overflowing_contact_buffer_runs_again_with_the_full_one(icosphere, monkeypatch, caplog):
+    """A contact buffer too small for the patch lying on the sphere: the scene refuses to hand out positions, and
+    ``settle`` runs again with Newton's full-size buffer, giving the full-buffer result."""
+    from garsim.garments.garment import Garment
+    from garsim.physics import newton_sim
+    from garsim.physics.newton_sim import ClothScene, ContactOverflow, settle
+
+    v, f = _grid_patch(5, z=1.003)
+    bv, bf = icosphere
+    cfg = SimConfig(substeps=3, iterations=2, max_settle_frames=3, min_settle_frames=3)
+    full, _ = settle(Garment(v, f, np.zeros(len(v), bool), "top"), bv, bf, "cotton", replace(cfg, tight_contacts=False))
+    monkeypatch.setattr(newton_sim, "MIN_CONTACT_CAPACITY", 1)
+    monkeypatch.setattr(newton_sim, "CONTACTS_PER_PARTICLE", 0)
+    scene = ClothScene(v, f, np.zeros(len(v), bool), bv, bf, ["cotton"], cfg)
+    scene.substep()
+    scene.substep()
+    with pytest.raises(ContactOverflow, match="over 1 contact record"):
+        scene.positions()
+    with caplog.at_level(logging.INFO, logger="garsim.physics.newton_sim"):
+        again, _ = settle(Garment(v, f, np.zeros(len(v), bool), "top"), bv, bf, "cotton", cfg)
+    assert "full-size contact buffer" in caplog.text
+    assert np.array_equal(full, again)

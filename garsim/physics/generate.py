@@ -133,7 +133,8 @@ class GenerateConfig:
         for key in ("out", "num_train", "num_test", "num_ood", "workers", "shard", "limit"):
             d.pop(key)
         sim = asdict(SimConfig(**self.sim))  # the effective simulator settings, defaults included
-        sim.pop("graphs")  # how frames are launched, not what they compute (bit-identical either way)
+        for key in EXECUTION_SIM_SETTINGS:
+            sim.pop(key)
         for key, legacy in OPTIONAL_SIM_SETTINGS.items():  # added later: folders made before them still match
             if key in sim and sim[key] == legacy:
                 sim.pop(key)
@@ -142,6 +143,9 @@ class GenerateConfig:
 
 
 MIN_LOW_VERTICES = 120
+EXECUTION_SIM_SETTINGS: tuple[str, ...] = ("graphs", "tight_contacts")
+"""``SimConfig`` fields that say how a simulation is run, not what it computes (bit-identical either way,
+``tests/test_physics_newton_sim.py``): not part of a folder's settings."""
 OPTIONAL_SIM_SETTINGS: dict[str, Any] = {"settle_damping": None, "settle_iterations": None, "collide_every": 1}
 """``SimConfig`` fields added after datasets were made without them, and the value that reproduces the old
 behaviour: left out of ``settings()`` at that value, so those folders still match."""

@@ -16,8 +16,8 @@ from __future__ import annotations
 import logging
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import asdict, dataclass
-from typing import Any
+from dataclasses import asdict, dataclass, replace
+from typing import Any, TypeVar
 
 import numpy as np
 
@@ -28,10 +28,24 @@ from garsim.geometry.mesh import face_normals, face_pairs, unique_edges
 from garsim.geometry.proximity import nearest_vertices
 
 log = logging.getLogger(__name__)
+_T = TypeVar("_T")
 
 REJECT_NON_FINITE = "non_finite"
 REJECT_OVERSTRETCHED = "overstretched"
 REJECT_PENETRATION = "penetration"
+
+
+CONTACTS_PER_PARTICLE = 32
+"""Body-cloth contact records the tight contact buffer holds per particle (at least ``MIN_CONTACT_CAPACITY``).
+Newton sizes the buffer for every candidate pair (~200,000 records for a 370-vertex t-shirt, of which about 2,000
+are ever used; at most 11 per particle were seen, in a paired dress), and several of its kernels run over the
+whole buffer every iteration, skipping the empty records: a tight buffer skips fewer and gives the same result.
+A run that overflows it is run again with Newton's full-size buffer (``ContactOverflow``)."""
+MIN_CONTACT_CAPACITY = 4096
+
+
+class ContactOverflow(RuntimeError):
+    """A collision pass needed more contact records than the tight buffer holds (its result is incomplete)."""
 
 
 class SimulationRejected(RuntimeError):
@@ -80,6 +94,9 @@ class SimConfig:
     # the same kernels with the same arguments, bit-identical to launching them one by one, without ~100 us of
     # Python per launch (docs/studies/generator_profile.md). How frames are launched, not what they compute.
     graphs: bool = True
+    # Size the body-cloth contact buffer for CONTACTS_PER_PARTICLE records per particle, not every candidate pair:
+    # the same result with fewer empty records skipped (a run that overflows it runs again with the full buffer).
+    tight_contacts: bool = True
 
     def __post_init__(self) -> None:
         if self.fps <= 0 or self.substeps < 1 or self.iterations < 1:
@@ -229,10 +246,19 @@ class ClothScene:
         model.soft_contact_kd = config.contact_kd
         model.soft_contact_mu = friction
         self.model = model
+        # at least one record per particle and 512 (the worker count of VBD's contact scatter on a CPU), so that a
+        # tight buffer changes no launch but the number of empty records skipped
+        self.contact_capacity = (
+            max(MIN_CONTACT_CAPACITY, CONTACTS_PER_PARTICLE * len(rest_q)) if config.tight_contacts else None
+        )
         self.pipeline = newton.CollisionPipeline(
-            model, soft_contact_gap=config.soft_contact_gap, enable_rigid_soft_full_surface_contact=True
+            model,
+            soft_contact_max=self.contact_capacity,
+            soft_contact_gap=config.soft_contact_gap,
+            enable_rigid_soft_full_surface_contact=True,
         )
         self.contacts = self.pipeline.contacts()
+        self._most_contacts = wp.zeros(1, dtype=wp.int32, device=device)  # the largest count of any pass so far
         self.solver = newton.solvers.SolverVBD(model, iterations=config.iterations)
         self.state_0 = model.state()
         self.state_1 = model.state()
@@ -254,7 +280,12 @@ class ClothScene:
 
     # -- state access (numpy round trips: views on CPU, copies on a CUDA device) -------------------
     def positions(self) -> np.ndarray:
-        """(C, N, 3) positions of every copy."""
+        """(C, N, 3) positions of every copy; raises ``ContactOverflow`` if any collision pass so far overflowed
+        the tight contact buffer."""
+        if self.contact_capacity is not None:
+            most = int(self._most_contacts.numpy()[0])
+            if most > self.contact_capacity:
+                raise ContactOverflow(f"a collision pass needed over {self.contact_capacity} contact records")
         return self.state_0.particle_q.numpy().reshape(self.copies, self.num_particles, 3).copy()
 
     def set_body(self, vertices: np.ndarray) -> None:
@@ -265,8 +296,8 @@ class ClothScene:
 
     def _launch_substep(self, place_pins: bool) -> None:
         """Launch one substep's operations (every one a Warp operation, so that they can be captured)."""
+        from garsim.physics.scene_kernels import atomic_max_int, scale_vec3
         from garsim.physics.scene_kernels import place_pins as place_pins_kernel
-        from garsim.physics.scene_kernels import scale_vec3
 
         wp, cfg, device = self._wp, self.config, self.model.device
         if place_pins and len(self.all_pinned):
@@ -276,6 +307,7 @@ class ClothScene:
         self.state_0.clear_forces()
         if self.substeps_done % cfg.collide_every == 0:
             self.pipeline.collide(self.state_0, self.contacts)
+            wp.launch(atomic_max_int, 1, [self.contacts.soft_contact_count, self._most_contacts], device=device)
         self.substeps_done += 1
         self.solver.step(self.state_0, self.state_1, self.control, self.contacts, cfg.dt)
         self.state_0, self.state_1 = self.state_1, self.state_0
@@ -376,6 +408,16 @@ def _settle_loop(
     }
 
 
+def _full_contacts_on_overflow(run: Callable[[SimConfig], _T], config: SimConfig) -> _T:
+    """``run(config)``; if a collision pass overflowed the tight contact buffer, run again from the start with
+    Newton's full-size buffer: the result is that of a full-buffer run either way."""
+    try:
+        return run(config)
+    except ContactOverflow as exc:
+        log.info("%s: running again with Newton's full-size contact buffer", exc)
+        return run(replace(config, tight_contacts=False))
+
+
 def settle(
     garment: Garment,
     body_vertices: np.ndarray,
@@ -394,11 +436,15 @@ def settle(
     body_vertices = np.asarray(body_vertices, dtype=np.float32)
     box = np.stack([garment.vertices.min(0), garment.vertices.max(0)])[None]
     used, faces_c = crop_body(body_vertices[None], body_faces, box, config.crop_margin)
-    scene = ClothScene(garment.vertices, garment.faces, garment.pinned, body_vertices[used], faces_c, [fabric], config)
     edges = unique_edges(garment.faces)
     rest = np.linalg.norm(garment.vertices[edges[:, 1]] - garment.vertices[edges[:, 0]], axis=1)
     t1 = time.perf_counter()
-    final, info = _settle_loop(scene, config.max_settle_frames, config, edges, rest)
+
+    def run(cfg: SimConfig) -> tuple[np.ndarray, dict[str, Any]]:
+        scene = ClothScene(garment.vertices, garment.faces, garment.pinned, body_vertices[used], faces_c, [fabric], cfg)
+        return _settle_loop(scene, cfg.max_settle_frames, cfg, edges, rest)
+
+    final, info = _full_contacts_on_overflow(run, config)
     t2 = time.perf_counter()
     info.update(
         fabric=fabric.name,
@@ -428,7 +474,6 @@ def simulate_poses(
     pin_segments: Sequence[np.ndarray],
     fabrics: Sequence[str | Fabric],
     config: SimConfig | None = None,
-    on_state: Callable[[int, np.ndarray, dict[str, Any]], None] | None = None,
 ) -> tuple[list[np.ndarray], list[dict[str, Any]]]:
     """Move the body through a chain of target poses and settle at each; every fabric copy at once.
 
@@ -438,7 +483,7 @@ def simulate_poses(
     ``config.settle_speed`` (or ``max_hold_frames``). Returns the settled states, one (C, N, 3)
     array per target reached, and one info dict per target (motion and hold frames, final speed,
     settled, seconds, aborted). A segment that explodes ends the chain: its info has ``aborted``
-    and no state. ``on_state(k, state, info)`` is called as each state settles.
+    and no state.
     """
     config = config or SimConfig()
     fabrics = [get_fabric(f) for f in fabrics]
@@ -465,42 +510,45 @@ def simulate_poses(
     shift = all_pins.mean(axis=1) - all_pins[:1].mean(axis=1) if n_pin else np.zeros((len(all_body), 3))
     boxes = np.stack([gv.min(0) + shift, gv.max(0) + shift], axis=1)
     used, faces_c = crop_body(all_body, body_faces, boxes, config.crop_margin)
-    scene = ClothScene(gv, garment_faces, pinned, segs[0][0, used], faces_c, fabrics, config)
     edges = unique_edges(garment_faces)
     rest = np.linalg.norm(gv[edges[:, 1]] - gv[edges[:, 0]], axis=1)
     s = config.substeps
     weights = (np.arange(1, s + 1, dtype=np.float32) / s)[:, None, None]
-    states: list[np.ndarray] = []
-    infos: list[dict[str, Any]] = []
-    for k, (body, pin) in enumerate(zip(segs, pins)):
-        t1 = time.perf_counter()
-        body = np.ascontiguousarray(body[:, used])
-        aborted = None
-        for j in range(1, len(body)):
-            bodies = (1.0 - weights) * body[j - 1] + weights * body[j]
-            ptarget = (1.0 - weights) * pin[j - 1] + weights * pin[j]
-            for i in range(s):
-                scene.substep(bodies[i], ptarget[i])
-            aborted = _abort_reason(scene.positions(), edges, rest, config)
-            if aborted:
+
+    def run(cfg: SimConfig) -> tuple[list[np.ndarray], list[dict[str, Any]]]:
+        scene = ClothScene(gv, garment_faces, pinned, segs[0][0, used], faces_c, fabrics, cfg)
+        states: list[np.ndarray] = []
+        infos: list[dict[str, Any]] = []
+        for k, (body, pin) in enumerate(zip(segs, pins)):
+            t1 = time.perf_counter()
+            body = np.ascontiguousarray(body[:, used])
+            aborted = None
+            for j in range(1, len(body)):
+                bodies = (1.0 - weights) * body[j - 1] + weights * body[j]
+                ptarget = (1.0 - weights) * pin[j - 1] + weights * pin[j]
+                for i in range(s):
+                    scene.substep(bodies[i], ptarget[i])
+                aborted = _abort_reason(scene.positions(), edges, rest, cfg)
+                if aborted:
+                    break
+            info: dict[str, Any] = {"target": k, "motion_frames": len(body) - 1, "aborted": aborted}
+            if aborted is None:
+                state, hold = _settle_loop(scene, cfg.max_hold_frames, cfg, edges, rest)
+                info.update(
+                    hold_frames=hold["frames"],
+                    final_speed=hold["final_speed"],
+                    settled=hold["settled"],
+                    aborted=hold["aborted"],
+                )
+            info["seconds"] = time.perf_counter() - t1
+            infos.append(info)
+            if info["aborted"]:
+                log.info("simulate_poses: target %d aborted (%s)", k, info["aborted"])
                 break
-        info: dict[str, Any] = {"target": k, "motion_frames": len(body) - 1, "aborted": aborted}
-        if aborted is None:
-            state, hold = _settle_loop(scene, config.max_hold_frames, config, edges, rest)
-            info.update(
-                hold_frames=hold["frames"],
-                final_speed=hold["final_speed"],
-                settled=hold["settled"],
-                aborted=hold["aborted"],
-            )
-        info["seconds"] = time.perf_counter() - t1
-        infos.append(info)
-        if info["aborted"]:
-            log.info("simulate_poses: target %d aborted (%s)", k, info["aborted"])
-            break
-        states.append(state.astype(np.float32))
-        if on_state is not None:
-            on_state(k, states[-1], info)
+            states.append(state.astype(np.float32))
+        return states, infos
+
+    states, infos = _full_contacts_on_overflow(run, config)
     log.debug("simulate_poses: %d targets, %.1f s", len(states), time.perf_counter() - t0)
     return states, infos
 
