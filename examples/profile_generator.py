@@ -28,6 +28,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--family", required=True, help="skirt, top, tshirt, longsleeve, trousers or dress")
     parser.add_argument("--paired", action="store_true", help="a paired-fabric group (four copies in one model)")
+    parser.add_argument("--min-vertices", type=int, default=0, help="the first such job of this many vertices or more")
     parser.add_argument("--seed", type=int, default=GenerateConfig.seed)
     parser.add_argument("--json", type=Path, help="write the figures here")
     args = parser.parse_args()
@@ -37,9 +38,16 @@ def main() -> None:
 
     with tempfile.TemporaryDirectory() as out:
         config = GenerateConfig(out=Path(out), seed=args.seed, num_train=60, num_test=0, num_ood=0)
-        jobs = [j for j in plan_jobs(config) if j.family == args.family and j.paired == args.paired]
+        jobs = [
+            j
+            for j in plan_jobs(config)
+            if j.family == args.family and j.paired == args.paired and j.vertices >= args.min_vertices
+        ]
         if not jobs:
-            raise SystemExit(f"no {'paired ' if args.paired else ''}{args.family} job among the first 60 planned")
+            raise SystemExit(
+                f"no {'paired ' if args.paired else ''}{args.family} job of {args.min_vertices}+ vertices among the "
+                "first 60 planned"
+            )
         job = jobs[0]
         simulate_job(job, config)  # load / compile every kernel
 
