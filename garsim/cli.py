@@ -613,8 +613,9 @@ def cmd_bench(args: argparse.Namespace) -> int:
                 f"{n} v: cold first call (garsim drape, fresh process) {r['cold_call_wall_ms'] / 1000:.2f} s, "
                 f"peak RSS {r['cold_call_peak_rss_mb']:.0f} MiB"
             )
-    if args.newton:
-        report["newton"] = bench_newton(args.sizes, garment=args.garment)
+    newton_sizes = [n for n in args.sizes if args.newton_max is None or n <= args.newton_max]
+    if args.newton and newton_sizes:
+        report["newton"] = bench_newton(newton_sizes, garment=args.garment)
     report["ratios"] = bench_ratios(report)
     for n, q in report["ratios"].items():
         if "paper_over_api" in q:
@@ -631,6 +632,7 @@ def cmd_bench(args: argparse.Namespace) -> int:
             ["garsim bench", *(["--model", args.model] if args.model else []), "--sizes", *map(str, args.sizes)]
             + ["--garment", args.garment, "--repeats", str(args.repeats), *(["--newton"] if args.newton else [])]
             + ([f"--cold-max {args.cold_max}"] if args.cold_max is not None else [])
+            + ([f"--newton-max {args.newton_max}"] if args.newton and args.newton_max is not None else [])
             + ["--out", str(out)]
         )
         print(_write_json(out, report))
@@ -899,6 +901,12 @@ def build_parser() -> argparse.ArgumentParser:
         metavar="N",
         help="time the cold first call (garsim drape, shipped model, fresh process) only up to N vertices "
         "(0: none; default: every size)",
+    )
+    p.add_argument(
+        "--newton-max",
+        type=int,
+        metavar="N",
+        help="with --newton: simulate only the sizes up to N vertices (minutes each; default: every size)",
     )
     p.add_argument("--out", help="write the timings to this .json file, a .md table and a .png log-log plot beside it")
     p.set_defaults(func=cmd_bench)

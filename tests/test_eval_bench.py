@@ -105,7 +105,8 @@ def test_cli_bench_tiny_writes_json_table_and_plot(tmp_path, monkeypatch):
         pytest.skip("no shipped weights")
     monkeypatch.setenv("OMP_NUM_THREADS", "1")
     out = tmp_path / "b.json"
-    assert main(["bench", "--sizes", "200", "300", "--repeats", "1", "--cold-max", "200", "--out", str(out)]) == 0
+    args = ["bench", "--sizes", "200", "300", "--repeats", "1", "--cold-max", "200", "--newton", "--newton-max", "0"]
+    assert main([*args, "--out", str(out)]) == 0
     report = json.loads(out.read_text())
     m = report["machine"]
     assert m["cpu"] and m["logical_cores"] > 0 and m["usable_cores"] > 0 and m["torch_threads"] == 1
@@ -131,7 +132,8 @@ def test_cli_bench_tiny_writes_json_table_and_plot(tmp_path, monkeypatch):
     assert report["ratios"]["200"]["cold_over_api"] > 1 and report["ratios"]["300"]["torch_over_numpy_forward"] > 0
     assert "cold_over_api" not in report["ratios"]["300"] and "paper_s" not in report["ratios"]["200"]
     table = out.with_suffix(".md").read_text()
-    assert "garsim bench --sizes 200 300" in table and "Machine:" in table
+    assert "newton" not in report  # --newton-max 0: no size simulated
+    assert "garsim bench --sizes 200 300" in table and "--newton-max 0" in table and "Machine:" in table
     assert table.count("\n| ") >= 6  # two headers + two rows in each table
     png = out.with_suffix(".png").read_bytes()
     assert png[:8] == b"\x89PNG\r\n\x1a\n" and len(png) > 10_000
