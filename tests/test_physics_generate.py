@@ -4,7 +4,7 @@ import signal
 import subprocess
 import sys
 import time
-from dataclasses import replace
+from dataclasses import asdict, replace
 
 import numpy as np
 import pytest
@@ -13,6 +13,7 @@ from garsim.data.store import DatasetStore
 from garsim.garments.templates import PARAMS
 from garsim.physics import generate as gen
 from garsim.physics.generate import FAMILIES, GenerateConfig, plan_jobs, split_indices
+from garsim.physics.newton_sim import SimConfig
 
 
 def test_plan_is_deterministic_and_split_without_leakage(tmp_path):
@@ -316,7 +317,10 @@ def test_settings_added_later_keep_older_folders_and_workers_refuse_changed_defa
     assert not set(legacy) & set(cfg.settings()["sim"])
     gen.check_settings(cfg)  # binds the folder
     gen.check_settings(cfg)  # and matches again
-    gen.check_settings(replace(cfg, sim={**legacy, "graphs": False}))  # how frames are launched is not a setting
+    for key in gen.EXECUTION_SIM_SETTINGS:  # how a simulation is run is not a setting of the folder
+        gen.check_settings(replace(cfg, sim={**legacy, key: False}))
+    execution = set(gen.EXECUTION_SIM_SETTINGS)
+    assert execution <= set(asdict(SimConfig())) and not execution & set(cfg.settings()["sim"])
     with pytest.raises(ValueError, match="sim"):
         gen.check_settings(GenerateConfig(out=tmp_path, num_train=1, sim={**legacy, "collide_every": 3}))
     monkeypatch.setattr(gen, "simulate_job", lambda job, config: pytest.fail("must not simulate"))
