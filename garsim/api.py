@@ -132,10 +132,14 @@ def check_scene(body: np.ndarray, garment: np.ndarray, up: str = "z", units: str
         )
 
 
+_SCENES = ContentCache(4, scope="garment")  # Scene.make's scenes, by the content of their meshes and settings
+
+
 @dataclasses.dataclass(frozen=True)
 class Scene:
     """The per-sequence part of a drape: the validated canonical body and garment (garsim's frame), the garment's
-    pin mask and fabric. ``sample(target)`` adds one target body."""
+    pin mask and fabric. ``sample(target)`` adds one target body. ``Scene.make`` keeps the last few scenes by
+    content, so draping one garment on pose after pose validates it and sets up its prior once."""
 
     body_canonical: np.ndarray
     body_faces: np.ndarray
@@ -165,6 +169,34 @@ class Scene:
         bc, bf = as_mesh(body_canonical, "canonical body")
         g, gf = as_mesh(garment, "garment")
         bc, g = (to_internal(v, up, units).astype(np.float32) for v in (bc, g))
+        key = (
+            content_key(bc, bf, g, gf),
+            pinned.strip().lower() if isinstance(pinned, str) else None if pinned is None else content_key(pinned),
+            fabric_name,
+            None if fabric_values is None else tuple(sorted(fabric_values.items())),
+            garment_type,
+            up,
+            units,
+        )
+        return _SCENES.get(
+            key, lambda: cls._validated(bc, bf, g, gf, fabric_name, fabric_values, pinned, garment_type, up, units)
+        )
+
+    @classmethod
+    def _validated(
+        cls,
+        bc: np.ndarray,
+        bf: np.ndarray,
+        g: np.ndarray,
+        gf: np.ndarray,
+        fabric_name: str,
+        fabric_values: dict[str, float] | None,
+        pinned: Any,
+        garment_type: str,
+        up: str,
+        units: str,
+    ) -> Scene:
+        """A new Scene of meshes already in garsim's frame, once their relation and the pins are checked."""
         check_scene(bc, g, up=up, units=units)
         if isinstance(pinned, str):
             if pinned.strip().lower() != "auto":

@@ -283,3 +283,28 @@ def test_sequence_smoothing_with_refinement_removes_flicker(anny_body, scene):
     prior = GarSim.prior_only().drape_sequence(*args, pinned=pins)
     assert jitter_mm(smooth) < 0.4 * jitter_mm(flicker)
     np.testing.assert_array_equal(smooth[:, pins], prior[:, pins])
+
+
+def test_scenes_are_reused_by_content_and_never_stale(anny_body, scene, monkeypatch):
+    import garsim.api as api
+
+    c, t, g = scene
+    checks = []
+    real = api.check_scene
+    monkeypatch.setattr(api, "check_scene", lambda *a, **k: checks.append(1) or real(*a, **k))
+    api._SCENES.clear()
+    sim = GarSim.prior_only()
+    body_c, body_t = (c.vertices, anny_body.faces), (t.vertices, anny_body.faces)
+    garment = g.vertices.copy()
+    first = sim.drape(body_c, body_t, (garment, g.faces), pinned="auto")
+    again = sim.drape(body_c, body_t, (garment.copy(), g.faces), pinned="auto")  # same content, a new array
+    assert len(checks) == 1  # validated and set up once
+    np.testing.assert_array_equal(first, again)
+    garment[:, 0] += 0.01  # edited in place: a new scene, the garment moves with it
+    moved = sim.drape(body_c, body_t, (garment, g.faces), pinned="auto")
+    assert len(checks) == 2
+    assert np.abs(moved - first).max() > 1e-3
+    pins = api.Scene.make(body_c, (garment, g.faces), pinned="auto").pinned
+    no_pins = api.Scene.make(body_c, (garment, g.faces)).pinned  # other settings, another scene
+    assert len(checks) == 3
+    assert pins.any() and not no_pins.any()
