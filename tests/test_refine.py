@@ -317,7 +317,8 @@ def test_fallback_keeps_valid_drapes_pins_symmetry_and_continuity(arm):
     shift = np.array([0.3, -0.2, 0.1])
     m = lambda p: p @ rot.T + shift  # noqa: E731
     out_r = refine(m(x), m(tpl), f, m(bv), bf, "cotton", fallback=m(tpl))
-    assert np.abs((out_r - shift) @ rot - base).max() <= 1e-5
+    # the blend's side factor reads the closest points' normals, whose rounding the turn changes: 0.06 mm here
+    assert np.abs((out_r - shift) @ rot - base).max() <= 1e-4
     noise = np.random.default_rng(2).normal(0.0, 1e-6, x.shape)
     assert np.abs(refine(x + noise, tpl, f, bv, bf, "cotton", fallback=tpl) - base).max() < 5e-4
     with pytest.raises(ValueError, match="fallback"):
@@ -382,9 +383,9 @@ def test_a_torn_long_sleeve_comes_back_within_the_bound(monkeypatch):
 
 def test_a_raised_knee_in_a_torn_skirt_ends_within_the_bound(monkeypatch):
     """A real case (tests/fixtures/refine_raised_knee_skirt.npz: the shipped model's raw drape of a 748-vertex test
-    maxi skirt with a knee raised into it, torn to 6.7x, and its skinning prior, torn to 8x): the contacts leave 1.7x
-    edges against the knee, and the final clamp brings every edge (rest >= 5 mm, a free end) within 1.5x by moving
-    vertices a few millimetres, some of them into the body."""
+    maxi skirt with a knee raised into it, torn to 6.7x, and its skinning prior, torn to 8x, so not blended towards):
+    the contacts leave 1.6x edges against the knee, and the final clamp brings every edge (rest >= 5 mm, a free end)
+    within 1.5x by moving vertices a few millimetres, some of them into the body."""
     import json
     from pathlib import Path
 
@@ -405,7 +406,7 @@ def test_a_raised_knee_in_a_torn_skirt_ends_within_the_bound(monkeypatch):
     assert figures(out)["inside_pct"] < 1.0
     monkeypatch.setattr("garsim.refine.CLAMP_PASSES", 0)
     unclamped = refine(*args, pinned=z["pinned"], fallback=z["prior"])
-    assert figures(unclamped)["max_stretch"] > 1.65
+    assert figures(unclamped)["max_stretch"] > 1.55
     assert np.linalg.norm(out - unclamped, axis=1).max() < 0.01  # the clamp moves vertices by millimetres
 
 

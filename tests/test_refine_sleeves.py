@@ -11,7 +11,7 @@ import trimesh
 from mesh_fixtures import sleeve
 
 from garsim.geometry.mesh import unique_edges
-from garsim.refine import RefineMemo, _constraints, _State, fallback_weight, obstacle, refine
+from garsim.refine import RefineMemo, _constraints, _State, fallback_seed, fallback_weight, obstacle, refine
 
 
 def _capsule(radius: float, height: float, z: float = 0.0) -> trimesh.Trimesh:
@@ -88,10 +88,12 @@ def test_trapped_sleeve_is_continuous_order_free_and_equivariant(armpit):
     assert np.abs((out_r - shift) @ rot - base).max() <= 1e-3
 
 
-def test_limb_through_the_cloth_between_shallow_vertices_uses_the_fallback():
+def test_limb_through_the_cloth_between_shallow_vertices_uses_the_fallback_behind_it():
     """A coarse sheet over a limb (radius 2.5 cm) that passes between two vertex columns: every vertex is outside,
-    but edges cross the limb 2.5 cm deep. Its depth is that of its deepest sample, so the fallback takes over there
-    (here a sheet 4 cm higher, clear of the limb) as for a vertex that deep."""
+    but edges cross the limb 2.5 cm deep, just above its axis. Its depth is that of its deepest sample, so where the
+    push-out would take the sheet over the limb and the fallback says under it (a sheet 4 cm lower, clear of the
+    limb), the fallback takes over there as for a vertex that deep. A fallback on the push-out's side (4 cm higher)
+    is not used: the sheet is pushed out over the limb, near where it was."""
     u = (np.arange(7) - 3) * 0.06
     xx, yy = np.meshgrid(u, u, indexing="ij")
     v = np.stack([xx.ravel(), yy.ravel(), np.zeros(xx.size)], 1)
@@ -102,40 +104,52 @@ def test_limb_through_the_cloth_between_shallow_vertices_uses_the_fallback():
     limb.apply_translation([0.03, 0.0, 0.0])
     bv, bf = np.asarray(limb.vertices), np.asarray(limb.faces, dtype=np.int64)
     assert _signed(v, bv, bf).min() > 0.002 and _edges_through(v, f, bv, bf) > 5
-    lifted = v + np.array([0.0, 0.0, 0.04])
-    out = refine(v, v, f, bv, bf, "cotton", fallback=lifted)
-    assert _edges_through(out, f, bv, bf) == 0 and _signed(out, bv, bf).min() >= 0.002 - 1e-5
     across = np.abs(v[:, 0] - 0.03) < 0.04  # the two columns either side of the limb
-    np.testing.assert_allclose(out[across], lifted[across], atol=1e-9)  # weight 1: on the fallback
+    under = v - np.array([0.0, 0.0, 0.04])
+    out = refine(v, v, f, bv, bf, "cotton", fallback=under)
+    assert _edges_through(out, f, bv, bf) == 0 and _signed(out, bv, bf).min() >= 0.002 - 1e-5
+    np.testing.assert_allclose(out[across], under[across], atol=1e-9)  # weight 1: on the fallback
+    lifted = v + np.array([0.0, 0.0, 0.04])
+    over = refine(v, v, f, bv, bf, "cotton", fallback=lifted)
+    assert _edges_through(over, f, bv, bf) == 0 and _signed(over, bv, bf).min() >= 0.002 - 1e-5
+    assert np.linalg.norm(over[across] - lifted[across], axis=1).min() > 0.005  # not handed over
+    np.testing.assert_array_equal(over, refine(v, v, f, bv, bf, "cotton"))  # as without a fallback
 
 
 def _blend_case():
-    """A sleeve around a limb with a column through the limb, a torn patch and three pins; the fallback is 6 cm
+    """A sleeve around a limb with a column through the limb, a torn patch and three pins; the fallback is 6.3 cm
     off the sleeve, so the few rings of the plain fade would stretch its border ~3x."""
     tpl, f = sleeve(radius=0.03, nu=16, nv=9, length=0.16)
     limb = _capsule(0.02, 0.5)
     bv, bf = np.asarray(limb.vertices), np.asarray(limb.faces, dtype=np.int64)
     x = tpl.copy()
-    x[:5, 0] -= 0.03  # a column through the limb
+    x[:5, 0] -= 0.035  # a column through the limb, 5 mm past its axis
     x[40:44, 2] += 0.06  # and a torn patch (edges ~3x)
     pinned = np.zeros(len(x), dtype=bool)
     pinned[-3:] = True
-    prior = tpl + np.array([0.0, 0.06, 0.0])
+    prior = tpl + np.array([0.02, 0.06, 0.0])  # the column's fallback behind its push-out
     con = _constraints(tpl, f, pinned, 1.1)
     return x, prior, con, obstacle(bv, bf)
 
 
 @pytest.mark.parametrize("border", [1.5, 1.1])
 def test_the_fallback_kernel_is_fallback_weight(border):
-    """The blend refine runs (a warp kernel) is the documented numpy reference: depth, edges through, torn edges
-    and the widened fade."""
+    """The blend refine runs (a warp kernel) is the documented numpy reference: the seeds of deep vertices and of
+    edges through the body (each with its side factor), torn edges and the widened fade."""
     x, prior, con, obs = _blend_case()
     state = _State(x, obs, con, 0.002)
-    hit = np.flatnonzero(state.buf["hit"].numpy())
-    depth = state.buf["d"].numpy().copy()
-    np.minimum.at(depth, con.moving_edges[hit, 0], state.buf["s_depth"].numpy()[hit])
-    np.minimum.at(depth, con.moving_edges[hit, 1], state.buf["s_depth"].numpy()[hit])
-    args = (depth, con.edges, con.closed_inv_degree, con.stretch_edges, con.rest, x)
+    buf = {k: v.numpy() for k, v in state.buf.items()}
+    shift = prior - x
+    seed = fallback_seed(buf["d"], buf["nq"], shift)
+    hit = np.flatnonzero(buf["hit"])
+    ends, t = con.moving_edges[hit], buf["s_deep_t"][hit][:, None]
+    edge_seed = fallback_seed(
+        buf["s_depth"][hit], buf["s_deep_normal"][hit], (1 - t) * shift[ends[:, 0]] + t * shift[ends[:, 1]]
+    )
+    np.maximum.at(seed, ends[:, 0], edge_seed)
+    np.maximum.at(seed, ends[:, 1], edge_seed)
+    assert edge_seed.max() > 0.9 and ((seed > 0.1) & (seed < 0.9)).sum() >= 3  # the column, 0.5-2 cm deep
+    args = (seed, con.edges, con.closed_inv_degree, con.stretch_edges, con.rest, x)
     w = fallback_weight(*args, prior, border) * con.mobile
     plain = fallback_weight(*args) * con.mobile  # the few rings alone
     assert (w == 1).sum() > 5 and (w == 0).sum() > 20 and ((w > 0) & (w < 1)).sum() > 5
