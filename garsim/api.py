@@ -381,8 +381,8 @@ class GarSim:
         """``refine`` (default on): after the network, a few iterations of physical constraint projection
         (``garsim.refine``: edges within the fabric's stretch limit, vertices and edges ``collision_margin``
         metres outside the body's triangles); on the test split and the external set it lowers the mean error
-        as well as the collisions (docs/results.md), at ~3-20 ms more per call (`garsim bench`; a new body pose refits
-        its BVH in ~1 ms).
+        as well as the collisions (docs/studies/fallback_side.md), at ~3-20 ms more per call (`garsim bench`; a new
+        body pose refits its BVH in ~1 ms).
         ``refine=False``: vertices inside the body or nearer than ``collision_margin`` are only pushed out along
         the body's blended normal at their soft anchor. ``collision_margin=None`` keeps the raw network output.
         ``max_vertices``: a denser garment is draped
