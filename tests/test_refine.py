@@ -10,7 +10,7 @@ import trimesh
 from mesh_fixtures import sleeve
 
 from garsim.geometry.cache import clear_all
-from garsim.geometry.inside import InsideTester
+from garsim.geometry.inside import InsideTester, inside_mask
 from garsim.geometry.mesh import unique_edges
 from garsim.refine import MAX_ROUNDS, TORN_STRETCH, default_max_stretch, obstacle, refine
 
@@ -473,3 +473,18 @@ def test_hand_over_rounds_end_once_the_contacts_are_clean(sphere, monkeypatch):
     sweeps.clear()
     refine_module._rounds(torn, 10, contacts_only=True)
     assert sweeps == [10] * MAX_ROUNDS + [10 * refine_module.TORN_SWEEPS] * (refine_module.MAX_TORN_ROUNDS - MAX_ROUNDS)
+
+
+def test_a_coarse_body_that_the_push_out_clears_keeps_the_patch_off_the_prior():
+    """A real case (tests/fixtures/refine_decimated_body_skirt.npz: the shipped model's raw drape of a 136-vertex test
+    skirt on the body decimated to 3,435 vertices, and its rig-free prior): its long edges through the legs can be
+    pushed out on the prior's side, so the fallback takes no patch to the prior (before the side test it moved a patch
+    by 114 mm; docs/studies/fallback_side.md) and the refinement moves no vertex by 3 cm."""
+    from pathlib import Path
+
+    z = np.load(Path(__file__).parent / "fixtures" / "refine_decimated_body_skirt.npz")
+    args = (z["raw"], z["template"], z["faces"], z["body"], z["body_faces"], str(z["fabric"]))
+    out = refine(*args, pinned=z["pinned"], fallback=z["prior"])
+    assert np.linalg.norm(out - z["raw"], axis=1).max() < 0.03
+    assert np.linalg.norm(z["prior"] - z["raw"], axis=1).max() > 0.1  # the prior is far: a hand-over would show
+    assert inside_mask(out, z["body"], z["body_faces"]).mean() < 0.01
