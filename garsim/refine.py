@@ -153,15 +153,15 @@ patch: projecting its edges back drags its vertices straight across the limb bet
 FALLBACK_STRETCH_RAMP = 1.0
 """... fully once the edge is this much (x rest length) longer (a smoothstep in between), and only as far as the
 fallback's own edge is shorter: scaled by the same smoothstep of the two length ratios' difference (0 where the
-fallback is torn as much, as the skinning prior is between a skirt's legs; on those 269 samples the torn-edge seeds
-without this cost skirts another 2.3 mm)."""
+fallback is torn as much, as the skinning prior is between a skirt's legs)."""
 FALLBACK_SIDE = 0.5
 """A deep vertex, or the deepest sample of an edge through the obstacle, seeds the fallback only where the fallback
 lies behind its push-out: with c the cosine between its closest point's outward normal and the way to the fallback,
 the seed is scaled by smoothstep(-c / this), 0 from c = 0 on (the push-out already takes it the fallback's way, and
 handing the patch to the skinning prior there only adds the prior's error), 1 from c = -this (pushed out to its own
-nearest surface it would wrap the limb's far side). On 269 training samples of v4 the blend without this test cost
-0.9 mm of mean error over no fallback at all, 3.1 mm on skirts, 2.3 on dresses (docs/studies/body_topology.md)."""
+nearest surface it would wrap the limb's far side). On 260 training samples of v4 the blend without this test and
+the torn-edge factor below cost 1.9 mm of mean error over no fallback at all (skirts 7.2 mm, dresses 2.3), with
+them 0.5 mm (docs/studies/fallback_side.md)."""
 FALLBACK_SIDE_EPS = 0.001
 """m: the way to the fallback counts fully once the fallback is this far off, so that the cosine is continuous where
 prediction and fallback meet."""
