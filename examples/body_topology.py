@@ -104,6 +104,43 @@ def pick(samples: list[Sample], per_family: int, seed: int) -> list[Sample]:
     return out
 
 
+def per_vertex(fabric: str = "denim") -> dict[str, dict[str, float]]:
+    """How far single vertices move when only the body's triangulation changes: a 600-vertex skirt on Anny's T-pose
+    body walking (the scene of tests/test_api_stability.py). Per variant, mean / max mm of the API defaults, the raw
+    network, the prior, and the raw network given the Anny-mesh (LBS) prior (the network's own dependence)."""
+    import dataclasses
+
+    from garsim.api import make_sample
+    from garsim.bodies.anny import AnnyBody
+    from garsim.bodies.poses import walk_pose
+    from garsim.garments.templates import make_garment
+
+    body = AnnyBody()
+    can = body.canonical()
+    tgt = body.pose({b: v[0] for b, v in walk_pose(0.8, stride=0.5).items()})
+    g = make_garment("skirt", body, {"length": 0.5, "flare": 0.4}, target_vertices=600)
+    base = ((can.vertices.astype(np.float64), body.faces), (tgt.vertices.astype(np.float64), body.faces))
+    garment = (g.vertices, g.faces)
+    sims = {"defaults": GarSim.pretrained(), "raw": GarSim.pretrained(collision_margin=None)}
+    sims["prior"] = GarSim.prior_only()
+    ref = {k: sim.drape(*base, garment, fabric=fabric) for k, sim in sims.items()}
+    ref_sample = make_sample(*base, garment, fabric=fabric)
+    net_ref = sims["raw"].model.predict(ref_sample)
+    out: dict[str, dict[str, float]] = {}
+    for name, variant in VARIANTS.items():
+        if variant is None:
+            continue
+        pair = body_pair(ref_sample, variant)
+        moved = {k: sims[k].drape(*pair, garment, fabric=fabric) - ref[k] for k in sims}
+        same_prior = dataclasses.replace(make_sample(*pair, garment, fabric=fabric), prior=ref_sample.prior)
+        moved["raw, Anny-mesh prior"] = sims["raw"].model.predict(same_prior) - net_ref
+        out[name] = {}
+        for k, d in moved.items():
+            mm = 1000.0 * np.linalg.norm(d, axis=1)
+            out[name][f"{k} mean mm"], out[name][f"{k} max mm"] = float(mm.mean()), float(mm.max())
+    return out
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--data", required=True, help="dataset folder with a test split")
@@ -150,6 +187,9 @@ def main() -> None:
             p, r, d = (by[m][fam] for m in ("prior", "raw", "defaults"))
             table.append(f"| {n} | {lo}-{hi} | {fam} | {p:.1f} | {r:.1f} ({r / p:.3f}) | {d:.1f} ({d / p:.3f}) |")
     print("\n".join(table))
+    report["per_vertex"] = per_vertex()
+    for n, row in report["per_vertex"].items():
+        print(n, " ".join(f"{k} {v:.2f}" for k, v in row.items()))
     if args.json:
         Path(args.json).write_text(json.dumps(report, indent=2) + "\n")
 
