@@ -28,7 +28,8 @@ def summarise(result: dict) -> dict:
     for key in ("sim_distance_mm", "pred_distance_mm", "sim_fold_deg", "pred_fold_deg"):
         values = np.array([r[key] for r in rows])
         out[key] = dict(zip(FABRICS, np.round(values.mean(0), 3).tolist()))
-        out[key.replace("_mm", "").replace("_deg", "") + "_spread"] = round(float((values[:, -1] - values[:, 0]).mean()), 3)
+        spread = float((values[:, -1] - values[:, 0]).mean())
+        out[key.replace("_mm", "").replace("_deg", "") + "_spread"] = round(spread, 3)
     return out
 
 

@@ -131,7 +131,8 @@ def main() -> None:
     if bench:
         parts.append(
             f"## Speed\n`OMP_NUM_THREADS=1 garsim bench --model garsim/weights --sizes 600 2400 10000 40000 "
-            f"--garment skirt --repeats 9 --newton --newton-max 2400 --out {args.bench}` (table and plot: `bench.md`, `bench.png`): "
+            f"--garment skirt --repeats 9 --newton --newton-max 2400 --out {args.bench}` "
+            "(table and plot: `bench.md`, `bench.png`): "
             + ", ".join(f"{g.name} {g.value:.1f} ms" for g in speed_goals(bench) if g.value is not None)
             + "."
         )
