@@ -1,3 +1,6 @@
+import sys
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -137,3 +140,13 @@ def test_paired_fabric_agreement_of_an_oracle_and_of_a_reversed_model(tmp_path):
     over = paired_fabric_agreement(Overshoot(), tmp_path)
     # the distances of all 3 midway fabrics fall outside their presets'; a scaled patch keeps its fold angles: 3 of 6
     assert over["ordering_agreement"] == 1.0 and over["midway_between"] == 0.5
+    # examples/fabric_spread.py's per-fabric means: the patch's vertices are the sphere's, 10 .. 40 mm out
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "examples"))
+    try:
+        from fabric_spread import summarise
+    finally:
+        sys.path.pop(0)
+    s = summarise(good)
+    assert s["sim_distance_mm"] == pytest.approx({"silk": 10.0, "cotton": 20.0, "denim": 30.0, "leather": 40.0})
+    assert s["pred_distance_mm"] == s["sim_distance_mm"] and s["sim_distance_spread"] == pytest.approx(30.0)
+    assert summarise(paired_fabric_agreement(Reversed(), tmp_path))["pred_distance_spread"] == pytest.approx(-30.0)
