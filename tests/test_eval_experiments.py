@@ -143,10 +143,22 @@ def test_paired_fabric_agreement_of_an_oracle_and_of_a_reversed_model(tmp_path):
     # examples/fabric_spread.py's per-fabric means: the patch's vertices are the sphere's, 10 .. 40 mm out
     sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "examples"))
     try:
-        from fabric_spread import summarise
+        from fabric_spread import fabric_deviation, summarise
     finally:
         sys.path.pop(0)
     s = summarise(good)
     assert s["sim_distance_mm"] == pytest.approx({"silk": 10.0, "cotton": 20.0, "denim": 30.0, "leather": 40.0})
     assert s["pred_distance_mm"] == s["sim_distance_mm"] and s["sim_distance_spread"] == pytest.approx(30.0)
     assert summarise(paired_fabric_agreement(Reversed(), tmp_path))["pred_distance_spread"] == pytest.approx(-30.0)
+    # each fabric's drape is 15, 5, 5, 15 mm from the group's mean (radial offsets of a unit-sphere patch)
+    from garsim.eval.experiments import paired_groups
+
+    dev = fabric_deviation(Truth(), paired_groups(tmp_path))
+    assert (
+        dev["sim_deviation_mm"] == pytest.approx(10.0, abs=1e-3) and dev["pred_deviation_mm"] == dev["sim_deviation_mm"]
+    )
+    assert dev["residual_deviation_mm"] == 0.0
+    assert dev["sim_deviation_smoothed80_mm"] < dev["sim_deviation_smoothed5_mm"] < dev["sim_deviation_mm"]
+    assert fabric_deviation(Reversed(), paired_groups(tmp_path))["residual_deviation_mm"] == pytest.approx(
+        20.0, abs=1e-3
+    )

@@ -143,6 +143,16 @@ def _distance_and_fold(samples: list[Sample], verts: list[np.ndarray]) -> tuple[
     return distance, [mean_fold_angle(v, s.garment_faces) for s, v in zip(samples, verts)]
 
 
+def paired_groups(data_dir: str | os.PathLike, split: str = "test", resolution: str = "low") -> list[list[Sample]]:
+    """The split's complete paired-fabric groups (one template, body and pose), each in ``FABRICS`` order."""
+    groups: dict[tuple[str, int], dict[str, Sample]] = defaultdict(dict)
+    for rec in DatasetStore(data_dir).sequences(split):
+        if rec.meta.get("paired"):
+            for s in rec.samples(resolution):
+                groups[(rec.meta["job"], s.meta["frame"])][s.fabric] = s
+    return [[g[f] for f in FABRICS] for g in groups.values() if set(g) == set(FABRICS)]
+
+
 def paired_fabric_agreement(
     model: Any,
     data_dir: str | os.PathLike,
@@ -159,17 +169,10 @@ def paired_fabric_agreement(
     Also the share of the physical fabrics midway between neighbouring presets (``interpolate_fabric(a, b, 0.5)``)
     whose predicted distance and fold angle lie between the two presets' predictions (within ``between_tol`` mm or
     deg): the model issue's "values between two presets give results between theirs"."""
-    store = DatasetStore(data_dir)
-    groups: dict[tuple[str, int], dict[str, Sample]] = defaultdict(dict)
-    for rec in store.sequences(split):
-        if rec.meta.get("paired"):
-            for s in rec.samples(resolution):
-                groups[(rec.meta["job"], s.meta["frame"])][s.fabric] = s
-    complete = [g for g in groups.values() if set(g) == set(FABRICS)]
+    complete = paired_groups(data_dir, split, resolution)
     rows, agree, pairs, spread, between = [], 0, 0, [], []
     midway = [interpolate_fabric(a, b, 0.5).values() for a, b in zip(FABRICS[:-1], FABRICS[1:])]
-    for g in complete:
-        samples = [g[f] for f in FABRICS]
+    for samples in complete:
         preds = _predict_all(model, samples)
         mids = [dataclasses.replace(s, fabric=CUSTOM_FABRIC, fabric_values=v) for s, v in zip(samples, midway)]
         sim_d, sim_a = _distance_and_fold(samples, [s.target for s in samples])
