@@ -519,6 +519,7 @@ def cmd_train(args: argparse.Namespace) -> int:
         "eps": args.collision_eps,
         "dir": args.direction_weight,
         "pair": args.pair_weight,
+        "pair_smooth": args.pair_smooth,
     }
     cfg = TrainConfig(
         out_dir=args.out,
@@ -858,6 +859,15 @@ def build_parser() -> argparse.ArgumentParser:
         ),
         *losses,
         "pair",
+    )
+    _config_default(
+        p.add_argument(
+            "--pair-smooth",
+            type=int,
+            help="smoothing rounds over the mesh of the paired-fabric term's residual (its large-scale part only)",
+        ),
+        *losses,
+        "pair_smooth",
     )
     p.add_argument("--restart", action="store_true", help="ignore an existing checkpoint in --out")
     _config_default(p.add_argument("--threads", type=int, help="torch threads per process"), *trainer, "threads")

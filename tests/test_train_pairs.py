@@ -91,6 +91,27 @@ def test_pair_loss_is_the_deviation_from_the_groups_mean_error():
     assert none.tolist() == [0.0, 0.0, 0.0]  # no grouped graph in the batch
 
 
+def test_smoothed_pair_loss_keeps_a_uniform_deviation_and_damps_wrinkles():
+    """Two members of one group on a 4-vertex path: a deviation the same at every vertex survives any smoothing; one
+    alternating +a, -a along the path (a wrinkle) is gone after one round: each vertex's neighbours hold -its value."""
+    edges = torch.tensor([[0, 1], [1, 2], [2, 3]])
+    one = torch.cat([edges, edges.flip(1)]).T
+    edge_index = torch.cat([one, one + 4], 1)
+    batch = torch.arange(2).repeat_interleave(4)
+    a = torch.tensor([0.0, 0.0, 0.01])
+    uniform = torch.cat([a.expand(4, 3), -a.expand(4, 3)])
+    target = torch.zeros(8, 3)
+    for rounds in (0, 1, 5):
+        loss = fabric_pair_loss(uniform, target, torch.tensor([3, 3]), batch, 2, edge_index, rounds)
+        assert loss.tolist() == pytest.approx([0.01, 0.01])
+    sign = torch.tensor([1.0, -1.0, 1.0, -1.0])[:, None]
+    wrinkle = torch.cat([sign * a, -sign * a])
+    raw = fabric_pair_loss(wrinkle, target, torch.tensor([3, 3]), batch, 2, edge_index, 0)
+    smoothed = fabric_pair_loss(wrinkle, target, torch.tensor([3, 3]), batch, 2, edge_index, 1)
+    assert raw.tolist() == pytest.approx([0.01, 0.01])
+    assert smoothed.tolist() == pytest.approx([0.0, 0.0], abs=1e-9)
+
+
 def test_training_with_the_pair_term_batches_groups_and_reduces_it(tmp_path):
     """A run on two paired groups and unpaired samples: every batch of the plan holds whole groups, and the pair
     term alone (the fabric-dependent part of the error; measured 3.9 -> 2.9 mm in 60 steps) falls; with weight 0

@@ -49,6 +49,7 @@ class LossWeights:
     eps: float = 0.004
     dir: float = 1.0  # weight of the direction + magnitude terms (ours, see the module docstring); that head only
     pair: float = 0.0  # weight of the paired-fabric term (ours, ``fabric_pair_loss``); 0: off, as in the paper
+    pair_smooth: int = 0  # smoothing rounds of that term's residual over the mesh (``fabric_pair_loss``); 0: none
 
 
 def _graph_ids(data: Data) -> tuple[torch.Tensor, int]:
@@ -76,19 +77,19 @@ def l2_loss(
     return (1.0 - beta) * s_free / n_free.clamp_min(1.0) + beta * s_pin / n_pin.clamp_min(1.0)
 
 
+def _neighbour_mean(x: torch.Tensor, edge_index: torch.Tensor) -> torch.Tensor:
+    """Each vertex's mesh neighbours' mean of ``x`` (its own value where it has no neighbour)."""
+    nbr_mean = scatter(x[edge_index[0]], edge_index[1], dim=0, dim_size=x.shape[0], reduce="mean")
+    count = scatter(torch.ones_like(edge_index[1], dtype=x.dtype), edge_index[1], dim=0, dim_size=x.shape[0])
+    return torch.where(count[:, None] > 0, nbr_mean, x)
+
+
 def laplacian_loss(pred: torch.Tensor, edge_index: torch.Tensor, batch: torch.Tensor, num_graphs: int) -> torch.Tensor:
     """Eq. 4 per graph: mean over vertices of ‖Ḡ_i − mean of its mesh neighbours‖, (B,).
 
     ``edge_index`` holds both directions of every mesh edge (senders row 0, receivers row 1).
     """
-    nbr_mean = scatter(pred[edge_index[0]], edge_index[1], dim=0, dim_size=pred.shape[0], reduce="mean")
-    has_nbr = (
-        scatter(
-            torch.ones_like(edge_index[1], dtype=pred.dtype), edge_index[1], dim=0, dim_size=pred.shape[0], reduce="sum"
-        )
-        > 0
-    )
-    lap = torch.where(has_nbr[:, None], pred - nbr_mean, torch.zeros_like(pred))
+    lap = pred - _neighbour_mean(pred, edge_index)
     return scatter(torch.linalg.vector_norm(lap, dim=-1), batch, dim=0, dim_size=num_graphs, reduce="mean")
 
 
@@ -173,12 +174,20 @@ def direction_loss(
 
 
 def fabric_pair_loss(
-    pred: torch.Tensor, target: torch.Tensor, pair: torch.Tensor, batch: torch.Tensor, num_graphs: int
+    pred: torch.Tensor,
+    target: torch.Tensor,
+    pair: torch.Tensor,
+    batch: torch.Tensor,
+    num_graphs: int,
+    edge_index: torch.Tensor | None = None,
+    smooth: int = 0,
 ) -> torch.Tensor:
     """Per graph: mean over its vertices of ‖r_i − mean of r_i over its group‖, r = Ḡ − G the error and the group
     the batch's graphs of one paired-fabric group (same mesh, vertex i matched to vertex i), (B,); 0 for a graph in
     no group (``pair`` = -1) or alone in the batch. Zero exactly when every member is off by the same vector field,
-    i.e. when the predicted differences between the fabrics are the simulated ones."""
+    i.e. when the predicted differences between the fabrics are the simulated ones. ``smooth`` > 0: that deviation
+    is first smoothed ``smooth`` times over the mesh (``edge_index``, both directions; x <- (x + neighbours' mean)
+    / 2), so that only its large-scale part counts, not the wrinkles."""
     counts = torch.bincount(batch, minlength=num_graphs)
     pos = torch.arange(batch.shape[0], device=batch.device) - (torch.cumsum(counts, 0) - counts)[batch]
     group = pair.to(batch.device)[batch]
@@ -186,7 +195,10 @@ def fabric_pair_loss(
     sel = torch.nonzero(group >= 0).ravel()  # vertices of grouped graphs only
     r = pred[sel] - target[sel]
     _, slot = torch.unique(torch.stack([group[sel], pos[sel]]), dim=1, return_inverse=True)
-    dev = dev.index_put((sel,), torch.linalg.vector_norm(r - scatter(r, slot, dim=0, reduce="mean")[slot], dim=-1))
+    d = pred.new_zeros(pred.shape).index_put((sel,), r - scatter(r, slot, dim=0, reduce="mean")[slot])
+    for _ in range(smooth):
+        d = 0.5 * (d + _neighbour_mean(d, edge_index))
+    dev = dev.index_put((sel,), torch.linalg.vector_norm(d[sel], dim=-1))
     return scatter(dev, batch, dim=0, dim_size=num_graphs, reduce="mean")
 
 
@@ -214,7 +226,9 @@ def garsim_loss(
         terms["dir"] = direction_loss(direction, magnitude, data, batch, num_graphs)
         total = total + w.dir * terms["dir"]
     if w.pair > 0 and getattr(data, "pair", None) is not None:
-        terms["pair"] = fabric_pair_loss(pred, data.target, data.pair, batch, num_graphs)
+        terms["pair"] = fabric_pair_loss(
+            pred, data.target, data.pair, batch, num_graphs, data.edge_index, w.pair_smooth
+        )
         total = total + w.pair * terms["pair"]
     if use_collision:
         if getattr(data, "col_body", None) is None:
