@@ -14,6 +14,7 @@
 #   FINETUNE_LR [2e-4]
 #   REMESH [0]         remeshed variants of every training sample in stage 1 (garsim train --remesh-copies)
 #   PAIR [0]           weight of the paired-fabric term (garsim train --pair-weight)
+#   PAIR_SMOOTH [0]    smoothing rounds of that term's residual (garsim train --pair-smooth; docs/studies/pair_weight.md)
 #   MIRROR [0]         1: every training sample also mirrored left to right in stage 1 (garsim train --mirror)
 # v0.6 and later (garsim/weights/MODEL_CARD.md): PROCS=2 BATCH=4 LR=5e-4 STAGE1_EPOCHS=12 FINETUNE_EPOCHS=4
 # STAGE2_EPOCHS=0 REMESH=2 MIRROR=1 PAIR=1 (shipped from $OUT/finetune/best).
@@ -33,7 +34,7 @@ else
   LAUNCH=(.venv/bin/garsim)
 fi
 TRAIN=("${LAUNCH[@]}" train --data "$DATA" --batch-size "${BATCH:-4}" --quiet --collision-weight 10
-  --collision-eps 0.002 --pair-weight "${PAIR:-0}")
+  --collision-eps 0.002 --pair-weight "${PAIR:-0}" --pair-smooth "${PAIR_SMOOTH:-0}")
 EPOCHS1=${STAGE1_EPOCHS:-300}
 MIRROR_FLAG=()
 if [ "${MIRROR:-0}" = 1 ]; then MIRROR_FLAG=(--mirror); fi
