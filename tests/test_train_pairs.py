@@ -110,6 +110,10 @@ def test_smoothed_pair_loss_keeps_a_uniform_deviation_and_damps_wrinkles():
     smoothed = fabric_pair_loss(wrinkle, target, torch.tensor([3, 3]), batch, 2, edge_index, 1)
     assert raw.tolist() == pytest.approx([0.01, 0.01])
     assert smoothed.tolist() == pytest.approx([0.0, 0.0], abs=1e-9)
+    with pytest.raises(ValueError, match="edge_index"):
+        fabric_pair_loss(wrinkle, target, torch.tensor([3, 3]), batch, 2, None, 2)
+    with pytest.raises(ValueError, match="rounds >= 0"):
+        fabric_pair_loss(wrinkle, target, torch.tensor([3, 3]), batch, 2, edge_index, -1)
 
 
 def test_training_with_the_pair_term_batches_groups_and_reduces_it(tmp_path):

@@ -188,6 +188,8 @@ def fabric_pair_loss(
     i.e. when the predicted differences between the fabrics are the simulated ones. ``smooth`` > 0: that deviation
     is first smoothed ``smooth`` times over the mesh (``edge_index``, both directions; x <- (x + neighbours' mean)
     / 2), so that only its large-scale part counts, not the wrinkles."""
+    if smooth < 0 or (smooth > 0 and edge_index is None):
+        raise ValueError(f"pair smoothing needs rounds >= 0 and the mesh's edge_index, got {smooth} rounds")
     counts = torch.bincount(batch, minlength=num_graphs)
     pos = torch.arange(batch.shape[0], device=batch.device) - (torch.cumsum(counts, 0) - counts)[batch]
     group = pair.to(batch.device)[batch]
