@@ -513,6 +513,7 @@ def cmd_train(args: argparse.Namespace) -> int:
         "device": args.device,
         "remesh_copies": args.remesh_copies,
         "mirror": True if args.mirror else None,
+        "trainable": tuple(args.trainable) if args.trainable else None,
     }
     losses = {
         "col": args.collision_weight,
@@ -886,6 +887,13 @@ def build_parser() -> argparse.ArgumentParser:
         action="store_true",
         help="also train on every training sample mirrored left to right (exact new ground truth: the physics is "
         "symmetric; validation is never augmented)",
+    )
+    p.add_argument(
+        "--trainable",
+        nargs="+",
+        metavar="PREFIX",
+        help="train only the parameters whose names start with these prefixes (e.g. processor.film "
+        "decoder.fabric_gain), the rest frozen (default: all)",
     )
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=cmd_train)

@@ -144,6 +144,24 @@ def test_init_starts_from_given_weights(tmp_path, data):
         Trainer(GarSimConfig(), _cfg(tmp_path / "c", epochs=1), tr, va, init=trained.model)
 
 
+def test_trainable_prefixes_train_one_pathway_and_freeze_the_rest(tmp_path, data):
+    """``trainable``: only the named parameters move (and the loss still goes down); a prefix naming nothing is refused."""
+    tr, va = data
+    start = Trainer(SMALL, _cfg(tmp_path / "a", epochs=1), tr, va)
+    start.fit()
+    before = {k: v.clone() for k, v in start.model.state_dict().items()}
+    cfg = _cfg(tmp_path / "b", epochs=3, trainable=["processor.film", "garment_encoder"])  # JSON gives lists
+    assert cfg.trainable == ("processor.film", "garment_encoder")
+    tuned = Trainer(SMALL, cfg, tr, va, init=start.model)
+    hist = tuned.fit()
+    assert hist[-1]["train_loss"] < hist[0]["train_loss"]
+    moved = {k for k, v in tuned.model.state_dict().items() if not torch.equal(v, before[k])}
+    assert moved and all(k.startswith(("processor.film", "garment_encoder")) for k in moved), sorted(moved)
+    assert any(k.startswith("processor.film") for k in moved) and any(k.startswith("garment_encoder") for k in moved)
+    with pytest.raises(ValueError, match=r"name no parameter.*modules"):
+        Trainer(SMALL, _cfg(tmp_path / "c", trainable=("procesor.film",)), tr, va)
+
+
 def test_a_training_step_mixes_families_canonical_poses_and_fabric_values(tmp_path):
     """One batch holding different garment families, canonical poses (T and A), presets and physical fabric
     values, and a rest sample: the loss is finite and goes down, and the fabric values reach the gradients."""

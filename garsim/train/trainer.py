@@ -84,6 +84,12 @@ class TrainConfig:
     model: str = "garsim"  # a key of baselines.MODELS: "garsim", or "deepsd" (the DeePSD-style baseline)
     remesh_copies: int = 0  # remeshed variants per training sample (garsim.train.augment; `garsim train` applies it)
     mirror: bool = False  # also train on every sample mirrored left to right (garsim.train.augment.mirror_sample)
+    # train only the parameters whose names start with one of these prefixes (e.g. "processor.film"), the rest
+    # frozen; empty: all. A fine-tune of one pathway (the fabric's) that leaves what the model already knows alone
+    trainable: tuple[str, ...] = ()
+
+    def __post_init__(self) -> None:
+        self.trainable = tuple(self.trainable)
 
     def to_dict(self) -> dict[str, Any]:
         """Plain JSON dict."""
@@ -144,6 +150,24 @@ class GraphDataset(Dataset):
             if self.cache:
                 self._graphs[i] = g
         return g
+
+
+def trainable_parameters(model: torch.nn.Module, prefixes: Sequence[str]) -> list[torch.nn.Parameter]:
+    """The parameters whose names start with one of ``prefixes`` (all when empty); every other one is frozen
+    (``requires_grad`` off). Raises ValueError when a prefix names no parameter."""
+    named = list(model.named_parameters())
+    if not prefixes:
+        return [p for _, p in named]
+    unknown = [pre for pre in prefixes if not any(name.startswith(pre) for name, _ in named)]
+    if unknown:
+        modules = sorted({name.split(".")[0] for name, _ in named})
+        raise ValueError(f"trainable prefixes {unknown} name no parameter; the model's modules: {modules}")
+    chosen = []
+    for name, p in named:
+        p.requires_grad_(any(name.startswith(pre) for pre in prefixes))
+        if p.requires_grad:
+            chosen.append(p)
+    return chosen
 
 
 def seed_everything(seed: int) -> None:
@@ -230,7 +254,9 @@ class Trainer:
         if self.world > 1:
             self.net = torch.nn.parallel.DistributedDataParallel(self.model)
         self.optimizer = torch.optim.AdamW(
-            self.model.parameters(), lr=train_config.lr, weight_decay=train_config.weight_decay
+            trainable_parameters(self.model, train_config.trainable),
+            lr=train_config.lr,
+            weight_decay=train_config.weight_decay,
         )
         self.out = Path(train_config.out_dir)
         self.epoch = 0
