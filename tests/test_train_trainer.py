@@ -145,7 +145,7 @@ def test_init_starts_from_given_weights(tmp_path, data):
 
 
 def test_trainable_prefixes_train_one_pathway_and_freeze_the_rest(tmp_path, data):
-    """``trainable``: only the named parameters move (and the loss still goes down); a prefix naming nothing is refused."""
+    """``trainable``: only the named parameters move (the loss still goes down); a prefix naming nothing is refused."""
     tr, va = data
     start = Trainer(SMALL, _cfg(tmp_path / "a", epochs=1), tr, va)
     start.fit()
