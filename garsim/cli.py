@@ -521,6 +521,7 @@ def cmd_train(args: argparse.Namespace) -> int:
         "dir": args.direction_weight,
         "pair": args.pair_weight,
         "pair_smooth": args.pair_smooth,
+        "fold": args.fold_weight,
     }
     cfg = TrainConfig(
         out_dir=args.out,
@@ -869,6 +870,15 @@ def build_parser() -> argparse.ArgumentParser:
         ),
         *losses,
         "pair_smooth",
+    )
+    _config_default(
+        p.add_argument(
+            "--fold-weight",
+            type=float,
+            help="weight of the fold-depth term: the prediction's mean fold angle against the simulation's; 0: off",
+        ),
+        *losses,
+        "fold",
     )
     p.add_argument("--restart", action="store_true", help="ignore an existing checkpoint in --out")
     _config_default(p.add_argument("--threads", type=int, help="torch threads per process"), *trainer, "threads")

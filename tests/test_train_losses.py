@@ -13,6 +13,7 @@ from garsim.train.losses import (
     LossWeights,
     collision_loss,
     direction_loss,
+    fold_loss,
     garsim_loss,
     l2_loss,
     laplacian_loss,
@@ -77,6 +78,27 @@ def test_normal_consistency_hand_value():
     ).item() == pytest.approx(0, abs=1e-7)
 
 
+def test_fold_term_hand_value_and_gradient():
+    """``fold_loss``: |chord of the prediction's fold - the simulation's| (chord 2 sin(θ/2) of the dihedral angle θ);
+    zero for a prediction folded as deeply as the simulation, even where its fold lies elsewhere; its gradient
+    deepens a fold that is too shallow."""
+    g = _graph()
+    one = torch.zeros(4, dtype=torch.long)
+    flat = V.clone()
+    flat[3, 2] = 0
+    theta = math.acos(1 / math.sqrt(3))  # the fold of V (test_normal_consistency_hand_value)
+    val = fold_loss(flat, V, g.faces, g.face_pairs, one, 1).item()
+    assert val == pytest.approx(2 * math.sin(theta / 2), rel=1e-5)
+    mirrored = V.clone()
+    mirrored[3, 2] = -1  # folded the other way, as deep: no fold-depth error
+    assert fold_loss(mirrored, V, g.faces, g.face_pairs, one, 1).item() == pytest.approx(0, abs=1e-5)
+    shallow = V.clone()
+    shallow[3, 2] = 0.5
+    shallow.requires_grad_(True)
+    fold_loss(shallow, V, g.faces, g.face_pairs, one, 1).sum().backward()
+    assert shallow.grad[3, 2] < 0  # descending lifts vertex 3: a deeper fold
+
+
 def test_collision_hinge_hand_value():
     g = _graph()
     eps = 0.004
@@ -101,6 +123,10 @@ def test_total_is_weighted_sum_and_per_graph_mean():
     total.backward()
     assert torch.isfinite(pred.grad).all() and pred.grad.abs().sum() > 0
     assert terms["sm"][0] == terms["sm"][1] and terms["l2"][1] > terms["l2"][0]
+    folded = LossWeights(fold=0.5)
+    total_f, terms_f = garsim_loss(b.pos, b, folded, use_collision=True)
+    assert terms_f["fold"].shape == (2,) and "fold" not in terms
+    torch.testing.assert_close(terms_f["total"], manual + 0.5 * terms_f["fold"])
 
 
 def test_collision_fraction_by_hand():

@@ -17,7 +17,10 @@ saturates, and the head stays at the prior (measured: 40 epochs at the prior's e
 cosine term alone). The prediction is still d̂ m, as in the paper. And ``LossWeights.pair``: in a batch holding
 a paired-fabric group (``garsim.train.pairs``: one template, body and pose in several fabrics), the part of each
 member's error that differs from the group's mean error, ``fabric_pair_loss``: the L2 term sees the few-mm
-differences between fabrics only beside errors ten times larger, this term sees nothing else.
+differences between fabrics only beside errors ten times larger, this term sees nothing else. And
+``LossWeights.fold``: how much the prediction is folded against the simulation, ``fold_loss``: where the folds lie
+is not predictable from the inputs (so the L2 term averages them away), how deep they are is, and light fabrics
+fold more than stiff ones.
 """
 
 from __future__ import annotations
@@ -50,6 +53,7 @@ class LossWeights:
     dir: float = 1.0  # weight of the direction + magnitude terms (ours, see the module docstring); that head only
     pair: float = 0.0  # weight of the paired-fabric term (ours, ``fabric_pair_loss``); 0: off, as in the paper
     pair_smooth: int = 0  # smoothing rounds of that term's residual over the mesh (``fabric_pair_loss``); 0: none
+    fold: float = 0.0  # weight of the fold-depth term (ours, ``fold_loss``); 0: off, as in the paper
 
 
 def _graph_ids(data: Data) -> tuple[torch.Tensor, int]:
@@ -107,6 +111,31 @@ def normal_consistency_loss(
     nc = 1.0 - (n[face_pairs[:, 0]] * n[face_pairs[:, 1]]).sum(-1)
     pair_graph = batch[faces[face_pairs[:, 0], 0]]
     return scatter(nc, pair_graph, dim=0, dim_size=num_graphs, reduce="mean")
+
+
+def mean_fold(
+    x: torch.Tensor, faces: torch.Tensor, face_pairs: torch.Tensor, batch: torch.Tensor, num_graphs: int
+) -> torch.Tensor:
+    """Per graph, the mean over adjacent face pairs of the chord between their unit normals, 2 sin(θ/2) for the
+    dihedral fold angle θ (≈ θ in radians for the usual folds; smooth where θ = 0), (B,)."""
+    n = face_normals_t(x, faces)
+    chord = torch.sqrt(((n[face_pairs[:, 0]] - n[face_pairs[:, 1]]) ** 2).sum(-1) + 1e-12)
+    return scatter(chord, batch[faces[face_pairs[:, 0], 0]], dim=0, dim_size=num_graphs, reduce="mean")
+
+
+def fold_loss(
+    pred: torch.Tensor,
+    target: torch.Tensor,
+    faces: torch.Tensor,
+    face_pairs: torch.Tensor,
+    batch: torch.Tensor,
+    num_graphs: int,
+) -> torch.Tensor:
+    """Per graph: |mean fold of the prediction − mean fold of the simulation| (``mean_fold``, ≈ radians), (B,).
+    Zero when the prediction is as folded as the simulation on average, wherever its folds lie."""
+    with torch.no_grad():
+        simulated = mean_fold(target, faces, face_pairs, batch, num_graphs)
+    return (mean_fold(pred, faces, face_pairs, batch, num_graphs) - simulated).abs()
 
 
 def nearest_in_graph(
@@ -212,7 +241,7 @@ def garsim_loss(
     direction: torch.Tensor | None = None,
     magnitude: torch.Tensor | None = None,
 ) -> tuple[torch.Tensor, dict[str, torch.Tensor]]:
-    """Eq. 7: total loss (scalar, mean over graphs) and the per-graph terms {l2, sm, nc, col, dir, pair, total} (B,).
+    """Eq. 7: total loss (scalar, mean over graphs) and the per-graph terms {l2, sm, nc, col, dir, pair, fold, total} (B,).
 
     ``direction``, ``magnitude``: the direction + magnitude head's body-frame unit directions and magnitudes
     (``return_parts``), which add the direction term when ``weights.dir`` > 0."""
@@ -232,6 +261,9 @@ def garsim_loss(
             pred, data.target, data.pair, batch, num_graphs, data.edge_index, w.pair_smooth
         )
         total = total + w.pair * terms["pair"]
+    if w.fold > 0:
+        terms["fold"] = fold_loss(pred, data.target, data.faces, data.face_pairs, batch, num_graphs)
+        total = total + w.fold * terms["fold"]
     if use_collision:
         if getattr(data, "col_body", None) is None:
             raise ValueError("the collision loss needs graphs built with with_collision=True")
