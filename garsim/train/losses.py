@@ -241,7 +241,8 @@ def garsim_loss(
     direction: torch.Tensor | None = None,
     magnitude: torch.Tensor | None = None,
 ) -> tuple[torch.Tensor, dict[str, torch.Tensor]]:
-    """Eq. 7: total loss (scalar, mean over graphs) and the per-graph terms {l2, sm, nc, col, dir, pair, fold, total} (B,).
+    """Eq. 7: total loss (scalar, mean over graphs) and the per-graph terms {l2, sm, nc, col, dir, pair, fold,
+    total} (B,).
 
     ``direction``, ``magnitude``: the direction + magnitude head's body-frame unit directions and magnitudes
     (``return_parts``), which add the direction term when ``weights.dir`` > 0."""
