@@ -447,6 +447,7 @@ def cmd_data_generate(args: argparse.Namespace) -> int:
         workers=args.workers,
         shard=args.shard,
         limit=args.limit,
+        paired_first=args.paired_first,
         sim={"graphs": False} if args.no_graphs else {},
         **{k: v for k, v in given.items() if v is not None},
     )
@@ -975,6 +976,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--workers", type=int, default=2, help="parallel simulation processes")
     p.add_argument("--shard", type=_shard, default=(0, 1), help="K/N: run every N-th job from K")
     p.add_argument("--limit", type=int, help="stop after this many jobs (smoke runs)")
+    p.add_argument(
+        "--paired-first",
+        action="store_true",
+        help="run the paired-fabric groups before the other jobs (the same dataset, in another order)",
+    )
     p.add_argument(
         "--no-graphs",
         action="store_true",

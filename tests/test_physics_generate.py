@@ -171,6 +171,18 @@ def test_splits_are_interleaved(tmp_path, monkeypatch):
     assert ran[:3] == ["train", "test", "ood"] and ran.count("test") == 4
 
 
+def test_paired_first_runs_the_paired_groups_first_and_binds_no_setting(tmp_path, monkeypatch):
+    ran = []
+    monkeypatch.setattr(gen, "_run_one", lambda args: ran.append(args[0]) or {"entries": [], "rejections": []})
+    cfg = GenerateConfig(out=tmp_path, num_train=24, num_test=0, num_ood=0, workers=1, paired_first=True)
+    gen.generate(cfg, progress=False)
+    paired = [j.paired for j in ran]
+    assert len(ran) == 24 and 0 < sum(paired) < 24
+    assert paired == sorted(paired, reverse=True)  # every paired job before every other one
+    assert {j.job_id for j in ran} == {j.job_id for j in gen.plan_jobs(cfg)}  # the same jobs
+    assert cfg.settings() == GenerateConfig(out=tmp_path, num_train=24).settings()  # a resumable order, not a setting
+
+
 _ORPHAN_SCRIPT = """
 import sys, time
 from garsim.physics.generate import _worker_pool

@@ -103,6 +103,7 @@ class GenerateConfig:
     workers: int = 2
     shard: tuple[int, int] = (0, 1)  # (k, n): run jobs with index % n == k
     limit: int | None = None  # run at most this many pending jobs (smoke runs)
+    paired_first: bool = False  # run the paired-fabric jobs before the others (same jobs, another order)
     sim: dict[str, Any] = field(default_factory=dict)  # SimConfig overrides
     plan_version: int = 2  # the job-planning rule (2: paired groups in every family); other folders are refused
 
@@ -130,7 +131,7 @@ class GenerateConfig:
         from garsim.physics.newton_sim import SimConfig
 
         d = asdict(self)
-        for key in ("out", "num_train", "num_test", "num_ood", "workers", "shard", "limit"):
+        for key in ("out", "num_train", "num_test", "num_ood", "workers", "shard", "limit", "paired_first"):
             d.pop(key)
         sim = asdict(SimConfig(**self.sim))  # the effective simulator settings, defaults included
         for key in EXECUTION_SIM_SETTINGS:
@@ -606,7 +607,7 @@ def generate(config: GenerateConfig, progress: bool = True) -> dict[str, Any]:
     # interleave the splits so that a partial run (or a stopped one) holds every split in proportion
     rank = {j.job_id: r for split in SPLITS for r, j in enumerate(x for x in jobs if x.split == split)}
     size = Counter(j.split for j in jobs)
-    pending.sort(key=lambda j: (rank[j.job_id] / size[j.split], j.index))
+    pending.sort(key=lambda j: (config.paired_first and not j.paired, rank[j.job_id] / size[j.split], j.index))
     if config.limit is not None:
         pending = pending[: config.limit]
     summary: dict[str, Any] = {
