@@ -99,6 +99,22 @@ def test_fold_term_hand_value_and_gradient():
     assert shallow.grad[3, 2] < 0  # descending lifts vertex 3: a deeper fold
 
 
+def test_fold_term_of_a_paired_group_adds_the_fold_differences_between_its_fabrics():
+    """Two members of one paired group, one predicted flat (fold error -c), one exact (0): each also pays its error's
+    distance to the group's mean error (c/2); ungrouped graphs (pair -1) pay only their own error."""
+    two = torch.tensor([0, 0, 0, 0, 1, 1, 1, 1])
+    faces = torch.cat([torch.from_numpy(F), torch.from_numpy(F) + 4])
+    pairs_ = torch.from_numpy(face_pairs(np.concatenate([F, F + 4])))
+    flat = V.clone()
+    flat[3, 2] = 0
+    pred, target = torch.cat([flat, V]), torch.cat([V, V])
+    c = 2 * math.sin(math.acos(1 / math.sqrt(3)) / 2)
+    grouped = fold_loss(pred, target, faces, pairs_, two, 2, pair=torch.tensor([0, 0]))
+    torch.testing.assert_close(grouped, torch.tensor([1.5 * c, 0.5 * c]), rtol=1e-5, atol=1e-6)
+    alone = fold_loss(pred, target, faces, pairs_, two, 2, pair=torch.tensor([-1, -1]))
+    torch.testing.assert_close(alone, torch.tensor([c, 0.0]), rtol=1e-5, atol=1e-6)
+
+
 def test_collision_hinge_hand_value():
     g = _graph()
     eps = 0.004

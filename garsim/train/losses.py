@@ -130,12 +130,24 @@ def fold_loss(
     face_pairs: torch.Tensor,
     batch: torch.Tensor,
     num_graphs: int,
+    pair: torch.Tensor | None = None,
 ) -> torch.Tensor:
-    """Per graph: |mean fold of the prediction − mean fold of the simulation| (``mean_fold``, ≈ radians), (B,).
-    Zero when the prediction is as folded as the simulation on average, wherever its folds lie."""
+    """Per graph: |e| for e = mean fold of the prediction − mean fold of the simulation (``mean_fold``, ≈ radians),
+    plus, for a graph of a paired-fabric group (``pair`` >= 0, as ``fabric_pair_loss``), |e − the group's mean e|:
+    the fold differences between the fabrics of one template, which a uniformly deeper fold does not mend, (B,).
+    Zero when every prediction is as folded as its simulation on average, wherever its folds lie."""
     with torch.no_grad():
         simulated = mean_fold(target, faces, face_pairs, batch, num_graphs)
-    return (mean_fold(pred, faces, face_pairs, batch, num_graphs) - simulated).abs()
+    err = mean_fold(pred, faces, face_pairs, batch, num_graphs) - simulated
+    loss = err.abs()
+    if pair is not None:
+        group = pair.to(err.device)
+        grouped = torch.nonzero(group >= 0).ravel()
+        if grouped.numel():
+            _, slot = torch.unique(group[grouped], return_inverse=True)
+            rel = err[grouped] - scatter(err[grouped], slot, dim=0, reduce="mean")[slot]
+            loss = loss.index_add(0, grouped, rel.abs())
+    return loss
 
 
 def nearest_in_graph(
@@ -263,7 +275,8 @@ def garsim_loss(
         )
         total = total + w.pair * terms["pair"]
     if w.fold > 0:
-        terms["fold"] = fold_loss(pred, data.target, data.faces, data.face_pairs, batch, num_graphs)
+        pair = getattr(data, "pair", None) if w.pair > 0 else None  # the groups travel together only then
+        terms["fold"] = fold_loss(pred, data.target, data.faces, data.face_pairs, batch, num_graphs, pair)
         total = total + w.fold * terms["fold"]
     if use_collision:
         if getattr(data, "col_body", None) is None:
