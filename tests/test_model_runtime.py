@@ -23,6 +23,7 @@ WEIGHTS = Path(__file__).parents[1] / "garsim" / "weights"
 SMALL = dict(latent=16, edge_latent=8, mlp_hidden=16, geo_hidden=8, geo_out=8, semantic_dim=8, num_steps=2)
 CONFIGS = {
     "paper head, silu, film": dict(head="direction_magnitude", activation="silu"),
+    "displacement, decoder film": dict(head="displacement", fabric_decoder_film=True),
     "displacement, relu, edge norm": dict(head="displacement", activation="relu", edge_layer_norm=True),
     "position, gelu, two layers": dict(head="position", activation="gelu", mlp_layers=2),
     "shared weights, no film, no residual": dict(share_weights=True, fabric_film=False, residual=False),

@@ -66,6 +66,8 @@ class GarSimConfig:
     magnitude_bias_init: float = -3.0
     # fabric conditioning (a deviation: the paper concatenates a one-hot f to the node input only)
     fabric_film: bool = True  # the fabric's physical values also scale/shift every edge update (FiLM) and the magnitude
+    # ... and the processed node latents before the decoder (FiLM that no LayerNorm follows; off in v0.7)
+    fabric_decoder_film: bool = False
 
     def __post_init__(self) -> None:
         self.semantic_grid = tuple(int(v) for v in self.semantic_grid)  # type: ignore[assignment]

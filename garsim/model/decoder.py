@@ -31,9 +31,13 @@ class Decoder(nn.Module):
         self.fabric_gain = (
             nn.Linear(FABRIC_FEATURES, 1) if cfg.fabric_film and cfg.head == "direction_magnitude" else None
         )
-        if self.fabric_gain is not None:
-            nn.init.zeros_(self.fabric_gain.weight)
-            nn.init.zeros_(self.fabric_gain.bias)
+        # per-channel scale/shift of the node latents by the fabric (zero-initialised): the processor's FiLM acts on
+        # the edge updates, whose scale the node update's LayerNorm takes out again; here nothing normalises it away
+        self.fabric_film = nn.Linear(FABRIC_FEATURES, 2 * cfg.latent) if cfg.fabric_decoder_film else None
+        for lin in (self.fabric_gain, self.fabric_film):
+            if lin is not None:
+                nn.init.zeros_(lin.weight)
+                nn.init.zeros_(lin.bias)
         last = self.mlp[-1]
         with torch.no_grad():
             last.weight.mul_(0.1)
@@ -45,6 +49,9 @@ class Decoder(nn.Module):
         self, node: torch.Tensor, fabric: torch.Tensor | None = None
     ) -> tuple[torch.Tensor, torch.Tensor | None, torch.Tensor | None]:
         """Return (vector, direction, magnitude); direction/magnitude are None for the alternative heads."""
+        if self.fabric_film is not None and fabric is not None:
+            scale, shift = self.fabric_film(fabric).chunk(2, dim=-1)
+            node = node * (1.0 + scale) + shift
         out = self.mlp(node)
         if self.head == "direction_magnitude":
             direction = F.normalize(out[:, :3], dim=-1, eps=1e-8)

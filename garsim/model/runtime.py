@@ -175,6 +175,8 @@ class GarSimRuntime:
         self.decoder = _MLP(s, "decoder.mlp.", act)
         gain = ("decoder.fabric_gain.weight", "decoder.fabric_gain.bias")
         self.fabric_gain = (s[gain[0]], s[gain[1]]) if gain[0] in s else None
+        film = ("decoder.fabric_film.weight", "decoder.fabric_film.bias")
+        self.decoder_film = (s[film[0]], s[film[1]]) if config.fabric_decoder_film else None
 
     @classmethod
     def load(cls, directory: str | Path) -> GarSimRuntime:
@@ -280,6 +282,9 @@ class GarSimRuntime:
         return node
 
     def _decode(self, node: np.ndarray, fabric: np.ndarray) -> np.ndarray:
+        if self.decoder_film is not None:
+            scale, shift = np.split(_linear(fabric, *self.decoder_film), 2, axis=1)
+            node = node * (np.float32(1.0) + scale) + shift
         out = self.decoder(node)
         if self.config.head != "direction_magnitude":
             return out / self.scale
