@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import argparse
 import ast
+import dataclasses
 import json
 import logging
 import os
@@ -550,6 +551,9 @@ def cmd_train(args: argparse.Namespace) -> int:
         train = MirrorAugmented(train)
     print(f"training on {len(train)} samples, validating on {len(val)} ({args.resolution} resolution)")
     model_config = init.config if init is not None else GarSimConfig(**({"head": args.head} if args.head else {}))
+    if args.fabric_decoder_film and not model_config.fabric_decoder_film:
+        model_config = dataclasses.replace(model_config, fabric_decoder_film=True)
+        init = init.widened(model_config) if init is not None else None  # its new FiLM layer starts at zero
     history = Trainer(model_config, cfg, train, val or None, init=init).fit()
     if history:
         print(json.dumps(history[-1], indent=2))
@@ -900,11 +904,17 @@ def build_parser() -> argparse.ArgumentParser:
         "symmetric; validation is never augmented)",
     )
     p.add_argument(
+        "--fabric-decoder-film",
+        action="store_true",
+        help="a FiLM of the node latents by the fabric before the decoder (GarSimConfig.fabric_decoder_film); with "
+        "--init, added to that model's weights at zero",
+    )
+    p.add_argument(
         "--trainable",
         nargs="+",
         metavar="PREFIX",
-        help="train only the parameters whose names start with these prefixes (e.g. processor.film "
-        "decoder.fabric_gain), the rest frozen (default: all)",
+        help="train only the parameters whose names start with these prefixes (e.g. processor.film), the rest "
+        "frozen (default: all)",
     )
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=cmd_train)

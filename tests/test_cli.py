@@ -2,6 +2,7 @@ import json
 
 import numpy as np
 import pytest
+import torch
 import trimesh
 
 from garsim.cli import build_parser, main
@@ -681,6 +682,39 @@ def test_train_on_some_families_only(tmp_path):
     assert main([*args, "--val-every", "2", "--quiet"]) == 0
     assert json.loads((run / "sequences.json").read_text()) == {"train": ["train-00000"], "val": []}
     assert (run / "best" / "model.safetensors").exists()
+
+
+def test_fine_tune_the_fabric_pathway_with_a_decoder_film_and_the_fold_term(tmp_path):
+    """`garsim train --init M --fabric-decoder-film --trainable ... --fold-weight`: the new FiLM layer is added to M's
+    weights, only the named parameters are trained (the rest keep M's values), and the run records its options."""
+    from pathlib import Path
+
+    from garsim.model.garsim import GarSimModel
+    from garsim.model.weights import WEIGHTS_FILE
+
+    fixture = str(Path(__file__).parent / "fixtures" / "dataset_v2")
+    base = tmp_path / "base"
+    args = ["train", "--data", fixture, "--epochs", "1", "--val-every", "2", "--quiet"]
+    assert main([*args, "--out", str(base), "--head", "displacement"]) == 0
+    run = tmp_path / "tuned"
+    tune = [
+        "--init",
+        str(base / "best"),
+        "--fabric-decoder-film",
+        "--trainable",
+        "processor.film",
+        "decoder.fabric_film",
+    ]
+    assert main([*args, "--out", str(run), *tune, "--pair-weight", "5", "--fold-weight", "0.3", "--lr", "1e-2"]) == 0
+    before, after = GarSimModel.load(base / "best"), GarSimModel.load(run / "checkpoint")
+    assert after.config.fabric_decoder_film and not before.config.fabric_decoder_film
+    old, new = before.state_dict(), after.state_dict()
+    assert all(torch.equal(v, new[k]) for k, v in old.items() if not k.startswith("processor.film"))
+    assert any(not torch.equal(v, new[k]) for k, v in old.items() if k.startswith("processor.film"))
+    assert new["decoder.fabric_film.weight"].abs().sum() > 0  # started at zero, trained
+    cfg = json.loads((run / "train_config.json").read_text())
+    assert cfg["trainable"] == ["processor.film", "decoder.fabric_film"] and cfg["losses"]["fold"] == 0.3
+    assert (run / "best" / WEIGHTS_FILE).exists()
 
 
 def test_animate_records_model_and_smoothing_in_the_file(tmp_path, anny_body):

@@ -203,3 +203,17 @@ def test_mean_aggregator_matches_brute_force():
     torch.testing.assert_close(out.detach(), want, atol=1e-6, rtol=0)
     deg = torch.bincount(recv, minlength=7).float()
     torch.testing.assert_close(v2.grad, (1.0 / deg[recv])[:, None].expand(-1, 3))
+
+
+def test_widened_model_keeps_the_weights_and_starts_its_new_layer_at_zero():
+    """``widened``: the same prediction with the decoder FiLM added (zero-initialised); a config that changes a
+    weight's shape is refused."""
+    import dataclasses
+
+    model = GarSimModel(GarSimConfig(latent=16, edge_latent=8, mlp_hidden=16, num_steps=2)).eval()
+    wide = model.widened(dataclasses.replace(model.config, fabric_decoder_film=True))
+    assert wide.config.fabric_decoder_film and wide.decoder.fabric_film.weight.abs().sum() == 0
+    sample = make_sample(fabric="denim")
+    np.testing.assert_array_equal(wide.predict(sample), model.predict(sample))
+    with pytest.raises(ValueError, match="no place"):
+        model.widened(dataclasses.replace(model.config, latent=32))

@@ -77,6 +77,18 @@ class GraphModel(nn.Module):
             if was_training:
                 self.train()
 
+    def widened(self, config: GarSimConfig) -> Self:
+        """A model of ``config`` holding this model's weights, the layers this one lacks (e.g. turned on by
+        ``fabric_decoder_film``) at their initial values; raises ValueError when one of this model's weights has
+        no place of the same shape in it (``config`` changes more than it adds)."""
+        model = type(self)(config)
+        mine, theirs = self.state_dict(), model.state_dict()
+        misfit = sorted(k for k, v in mine.items() if k not in theirs or theirs[k].shape != v.shape)
+        if misfit:
+            raise ValueError(f"the model's weights {misfit[:5]} have no place in the widened config")
+        model.load_state_dict(mine, strict=False)
+        return model
+
     def num_parameters(self) -> int:
         """Number of trainable parameters."""
         return sum(p.numel() for p in self.parameters())
