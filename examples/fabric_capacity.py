@@ -9,15 +9,16 @@ pathway), not of the data. ``docs/studies/fabric_folds.md`` ran:
     .venv/bin/python examples/fabric_capacity.py --data ~/garsim-data/v4 --fold-weight 1.0
     .venv/bin/python examples/fabric_capacity.py --data ~/garsim-data/v4 --fold-weight 1.0 --trainable processor.film
     .venv/bin/python examples/fabric_capacity.py --data ~/garsim-data/v4 --fold-weight 0
-    .venv/bin/python examples/fabric_capacity.py --data ~/garsim-data/v4 --fold-weight 1.0 --init DFILM \\
+    .venv/bin/python examples/fabric_capacity.py --data ~/garsim-data/v4 --fold-weight 1.0 --decoder-film \\
         --trainable processor.film decoder.fabric_film
 
-(``DFILM``: v0.7's weights in a model with ``fabric_decoder_film=True``, its new layer zero.)
+(``--decoder-film``: the model's weights widened by ``fabric_decoder_film``, the new FiLM layer at zero.)
 """
 
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import tempfile
 
 import numpy as np
@@ -48,6 +49,7 @@ def main() -> None:
     parser.add_argument("--split", default="train")
     parser.add_argument("--groups", type=int, default=2, help="fit the first N complete groups")
     parser.add_argument("--init", default="garsim/weights", help="the model to start from")
+    parser.add_argument("--decoder-film", action="store_true", help="add the decoder FiLM (at zero) to --init")
     parser.add_argument("--trainable", nargs="*", default=[], help="parameter-name prefixes to train (default: all)")
     parser.add_argument("--fold-weight", type=float, default=1.0)
     parser.add_argument("--pair-weight", type=float, default=20.0)
@@ -58,6 +60,8 @@ def main() -> None:
     if not groups:
         raise SystemExit(f"{args.data} has no complete paired group in its {args.split!r} split")
     init = GarSimModel.load(args.init)
+    if args.decoder_film:
+        init = init.widened(dataclasses.replace(init.config, fabric_decoder_film=True))
     with tempfile.TemporaryDirectory() as out:
         cfg = TrainConfig(
             out_dir=out,
