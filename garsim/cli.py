@@ -551,6 +551,8 @@ def cmd_train(args: argparse.Namespace) -> int:
         train = MirrorAugmented(train)
     print(f"training on {len(train)} samples, validating on {len(val)} ({args.resolution} resolution)")
     model_config = init.config if init is not None else GarSimConfig(**({"head": args.head} if args.head else {}))
+    if args.fabric_decoder_film and cfg.model != "garsim":
+        raise ValueError(f"--fabric-decoder-film is a layer of GarSim; the {cfg.model!r} model has none")
     if args.fabric_decoder_film and not model_config.fabric_decoder_film:
         model_config = dataclasses.replace(model_config, fabric_decoder_film=True)
         init = init.widened(model_config) if init is not None else None  # its new FiLM layer starts at zero

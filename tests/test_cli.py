@@ -684,7 +684,7 @@ def test_train_on_some_families_only(tmp_path):
     assert (run / "best" / "model.safetensors").exists()
 
 
-def test_fine_tune_the_fabric_pathway_with_a_decoder_film_and_the_fold_term(tmp_path):
+def test_fine_tune_the_fabric_pathway_with_a_decoder_film_and_the_fold_term(tmp_path, capsys):
     """`garsim train --init M --fabric-decoder-film --trainable ... --fold-weight`: the new FiLM layer is added to M's
     weights, only the named parameters are trained (the rest keep M's values), and the run records its options."""
     from pathlib import Path
@@ -714,6 +714,10 @@ def test_fine_tune_the_fabric_pathway_with_a_decoder_film_and_the_fold_term(tmp_
     assert new["decoder.fabric_film.weight"].abs().sum() > 0  # started at zero, trained
     cfg = json.loads((run / "train_config.json").read_text())
     assert cfg["trainable"] == ["processor.film", "decoder.fabric_film"] and cfg["losses"]["fold"] == 0.3
+    deepsd = ["--out", str(tmp_path / "d"), "--model", "deepsd", "--fabric-decoder-film"]
+    capsys.readouterr()
+    assert main([*args, *deepsd]) == 2
+    assert "layer of GarSim" in _one_error_line(capsys)
     assert (run / "best" / WEIGHTS_FILE).exists()
 
 
