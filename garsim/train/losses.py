@@ -119,6 +119,8 @@ def mean_fold(
     """Per graph, the mean over adjacent face pairs of the chord between their unit normals, 2 sin(θ/2) for the
     dihedral fold angle θ (≈ θ in radians for the usual folds; smooth where θ = 0), (B,)."""
     n = face_normals_t(x, faces)
+    # |n1 - n2| from the difference, not sqrt(2 - 2 cos): cos loses the small angles to float32 cancellation
+    # (the chord from cos changed the study's fitted folds by up to 0.7 deg and its errors by 5 mm)
     chord = torch.sqrt(((n[face_pairs[:, 0]] - n[face_pairs[:, 1]]) ** 2).sum(-1) + 1e-12)
     return scatter(chord, batch[faces[face_pairs[:, 0], 0]], dim=0, dim_size=num_graphs, reduce="mean")
 
