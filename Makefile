@@ -42,6 +42,8 @@ results: export OMP_NUM_THREADS := 1
 results: $(STAMP)
 	$(VENV)/bin/garsim eval --data $(DATA) --model $(MODEL) --refine --out docs/results.json
 	$(VENV)/bin/garsim eval --data $(DATA) --model $(MODEL) --resolution full --out docs/results_full.json
+	$(VENV)/bin/garsim eval --data $(DATA) --model $(MODEL) --by construction canonical_pose pose_mode fabric \
+	  --out docs/results_by.json
 	if [ -f $(EXTERNAL) ]; then \
 	  $(VENV)/bin/python $(EXTERNAL) --model $(MODEL) --json docs/external_default.json && \
 	  $(VENV)/bin/python examples/external_check.py --model $(MODEL) --raw --json docs/external_raw.json && \
@@ -49,7 +51,7 @@ results: $(STAMP)
 	$(VENV)/bin/garsim bench --model $(MODEL) --sizes 600 2400 10000 40000 --garment skirt --repeats 9 \
 	  --newton --newton-max 2400 --out docs/bench.json
 	$(VENV)/bin/python examples/make_report.py --run $(patsubst %/log.csv,%,$(wildcard $(RUN)/log.csv)) --model $(MODEL) --data $(DATA) \
-	  --results docs/results.json --results-full docs/results_full.json --bench docs/bench.json \
+	  --results docs/results.json --results-full docs/results_full.json --results-by docs/results_by.json --bench docs/bench.json \
 	  $$([ -f docs/external_default.json ] && echo --external-default docs/external_default.json) \
 	  $$([ -f docs/external_raw.json ] && echo --external-raw docs/external_raw.json) \
 	  $$([ -f docs/external_prior_refine.json ] && echo --external docs/external_prior_refine.json)

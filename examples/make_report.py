@@ -18,7 +18,7 @@ import numpy as np
 
 from garsim.api import GarSim
 from garsim.data.store import DatasetStore
-from garsim.eval.experiments import format_table
+from garsim.eval.experiments import format_group_table, format_table
 from garsim.eval.goals import format_goals, model_goals, speed_goals
 from garsim.eval.plots import plot_paired_fabrics, plot_training_curve
 from garsim.geometry.render import render_grid
@@ -65,6 +65,7 @@ def main() -> None:
     parser.add_argument("--data", required=True)
     parser.add_argument("--results", required=True, help="JSON written by `garsim eval --refine --out`")
     parser.add_argument("--results-full", help="`garsim eval --resolution full --out` (collisions at full resolution)")
+    parser.add_argument("--results-by", help="`garsim eval --by KEY... --out` (the error per construction, pose, ...)")
     parser.add_argument("--external-default", help="check.py --json with the API defaults")
     parser.add_argument("--external-raw", help="examples/external_check.py --raw --json (the raw network)")
     parser.add_argument("--external", nargs="*", default=[], help="further check.py --json files for the table")
@@ -114,6 +115,13 @@ def main() -> None:
     full_command = f"garsim eval --data {args.data}{model_arg} --resolution full --out {args.results_full}"
     for split in [split for split in ("test", "ood") if split in (full or {})]:
         parts.append(f"## {split} split at the simulated resolution\n`{full_command}`\n\n" + format_table(full[split]))
+    by = _load(args.results_by)
+    for split in [split for split in ("test", "ood") if split in (by or {})]:
+        by_command = f"garsim eval --data {args.data}{model_arg} --splits {split} --by {' '.join(by['by'])}"
+        parts.append(
+            f"## {split} split by {', '.join(by['by'])} (raw network)\n`{by_command} --out {args.results_by}`\n\n"
+            + format_group_table(by[split], next(iter(by[split])))
+        )
     fab = results.get("paired_fabrics")
     if fab:
         fab_png = plot_paired_fabrics(fab, docs / "paired_fabrics.png")

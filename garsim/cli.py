@@ -26,6 +26,8 @@ FABRIC_CHOICES: tuple[str, ...] = ("silk", "cotton", "denim", "leather")
 FAMILY_CHOICES: tuple[str, ...] = ("skirt", "top", "tshirt", "longsleeve", "trousers", "dress")
 """The garment families (``garsim.data.sample.GARMENT_TYPES``, repeated for the same reason)."""
 MODEL_CHOICES: tuple[str, ...] = ("garsim", "deepsd")
+GROUP_CHOICES: tuple[str, ...] = ("canonical_pose", "construction", "fabric", "family", "paired", "pose_mode")
+"""What `garsim eval --by` groups rows by (``garsim.eval.experiments.GROUPS``, repeated for the same reason)."""
 MESH_OUTPUTS: tuple[str, ...] = (".obj", ".ply", ".glb", ".off", ".stl")
 """What ``garsim drape --out`` writes (``garsim.geometry.io.save_mesh``)."""
 MESH_INPUTS: tuple[str, ...] = (".obj", ".ply", ".glb", ".gltf", ".off", ".stl")
@@ -570,10 +572,12 @@ def cmd_eval(args: argparse.Namespace) -> int:
     from garsim.model.baselines import load_model
 
     model = load_model(args.model) if args.model else GarSim.default().model
-    report: dict = {"model": args.model or "shipped", "resolution": args.resolution}
+    report: dict = {"model": args.model or "shipped", "resolution": args.resolution, "by": args.by}
     name = model.kind if model is not None else "garsim"
     for split in args.splits:
-        report[split] = evaluate_split(model, args.data, split, args.resolution, refine=args.refine, name=name)
+        report[split] = evaluate_split(
+            model, args.data, split, args.resolution, refine=args.refine, name=name, by=args.by
+        )
         print(f"## {split} split ({args.resolution} resolution)\n{format_table(report[split])}\n")
     if model is not None:
         fab = paired_fabric_agreement(model, args.data, resolution=args.resolution)
@@ -927,6 +931,13 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--splits", nargs="+", default=["test", "ood"], help="dataset splits to score")
     p.add_argument("--refine", action="store_true", help="also score garsim+refine and prior+refine")
     p.add_argument("--resolution", choices=("low", "full"), default="low", help="mesh resolution scored")
+    p.add_argument(
+        "--by",
+        nargs="+",
+        choices=GROUP_CHOICES,
+        default=["family"],
+        help="group the rows by these (each a set of rows beside 'all'; default: the garment family)",
+    )
     p.add_argument("--out", help="write the results to this .json file")
     p.set_defaults(func=cmd_eval)
 

@@ -233,18 +233,20 @@ def test_cli_choices_match_the_library():
         ANIMATION_OUTPUTS,
         FABRIC_CHOICES,
         FAMILY_CHOICES,
+        GROUP_CHOICES,
         MESH_INPUTS,
         MESH_OUTPUTS,
         MODEL_CHOICES,
         MOTION_CHOICES,
     )
     from garsim.data.sample import FABRICS, GARMENT_TYPES
+    from garsim.eval.experiments import GROUPS
     from garsim.export import SUPPORTED_EXTENSIONS
     from garsim.geometry.io import SUPPORTED_EXTENSIONS as MESH_EXTENSIONS
     from garsim.model.baselines import MODELS
 
     assert FABRIC_CHOICES == FABRICS and MOTION_CHOICES == MOTIONS and set(MODEL_CHOICES) == set(MODELS)
-    assert FAMILY_CHOICES == GARMENT_TYPES
+    assert FAMILY_CHOICES == GARMENT_TYPES and GROUP_CHOICES == tuple(sorted(GROUPS))
     assert set(ANIMATION_OUTPUTS) == set(SUPPORTED_EXTENSIONS) | {".npz"}  # .npz: the viewer's sequence
     assert set(MESH_OUTPUTS) == set(MESH_EXTENSIONS) - {".gltf"} and set(MESH_INPUTS) == set(MESH_EXTENSIONS)
 

@@ -5,11 +5,11 @@ import numpy as np
 import pytest
 
 from garsim.data.store import DatasetStore, GarmentLevel, SequenceRecord
-from garsim.eval.experiments import evaluate_split, format_table
+from garsim.eval.experiments import evaluate_split, format_group_table, format_table
 
 
-def _store(tmp_path):
-    """Two tiny sequences on a unit-sphere 'body': truth 10 mm outside the prior."""
+def _store(tmp_path, metas=({}, {})):
+    """Two tiny sequences on a unit-sphere 'body': truth 10 mm outside the prior; ``metas``: their metadata."""
     import trimesh
 
     body = trimesh.creation.icosphere(subdivisions=2)
@@ -24,6 +24,7 @@ def _store(tmp_path):
         rec = SequenceRecord(
             f"test-{i}", "test", kind, fabric, bv, bv[None].repeat(2, 0), bf, np.array([2, 9]), {"low": lv, "full": lv}
         )
+        rec.meta.update(metas[i])
         store.append_manifest(store.write_sequence(rec))
     return tmp_path
 
@@ -43,6 +44,40 @@ def test_evaluate_prior_error_is_the_known_offset(tmp_path):
     assert (prior["correction_cosine"], prior["correction_gain"]) == (0.0, 0.0)
     table = format_table(res)
     assert "| prior | skirt | 2 | 10.00 |" in table and "jitter" not in table
+
+
+def test_rows_grouped_by_canonical_pose_construction_and_pose_mode(tmp_path):
+    """The two sequences of the sphere store tagged with their metadata: every grouping splits the 4 frames the
+    same way as the family does (a 10 mm prior error each), sequences without the key fall under 'unknown',
+    and the per-frame pose mode comes from the sequence's list."""
+    modes = ["walk", "everyday"]
+    metas = [
+        {"canonical_pose": "apose", "construction": "implicit", "pose_modes": modes, "paired": True},
+        {"canonical_pose": "tpose", "construction": "template", "pose_modes": modes, "paired": False},
+    ]
+    root = _store(tmp_path, metas)
+    res = evaluate_split(None, root, "test", by=("canonical_pose", "construction", "pose_mode", "paired"))
+    prior = res["prior"]
+    assert set(prior) == {
+        "all",
+        "canonical_pose=apose",
+        "canonical_pose=tpose",
+        "construction=implicit",
+        "construction=template",
+        "pose_mode=walk",
+        "pose_mode=everyday",
+        "paired=paired",
+        "paired=single",
+    }
+    assert prior["canonical_pose=apose"]["frames"] == prior["pose_mode=walk"]["frames"] == 2
+    assert prior["all"]["frames"] == 4 and prior["pose_mode=everyday"]["euclidean_mm"] == pytest.approx(10.0, abs=0.01)
+    table = format_group_table(res, "nearest")
+    assert table.splitlines()[2] == "| all | 4 | 10.00 | 10.00 | 1.000 | 0.00 | 50.00 |"
+    assert table.splitlines()[3].startswith("| canonical_pose=apose | 2 | 10.00 |")
+    untagged = evaluate_split(None, _store(tmp_path / "plain"), "test", by=("canonical_pose", "fabric"))["prior"]
+    assert set(untagged) == {"all", "canonical_pose=unknown", "fabric=silk", "fabric=denim"}
+    with pytest.raises(ValueError, match="cannot group results by \\['colour'\\]"):
+        evaluate_split(None, root, "test", by=("colour",))
 
 
 def test_post_processed_rows_leave_out_what_their_post_process_enforces(tmp_path):

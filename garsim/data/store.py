@@ -77,6 +77,7 @@ class SequenceRecord:
                 f"sequence {self.seq_id} has no {resolution!r} resolution (it holds {sorted(self.levels)})"
             )
         lv = self.levels[resolution]
+        modes = self.meta.get("pose_modes") or []  # per stored frame: how its target pose was sampled
         return [
             Sample(
                 body_canonical=self.body_canonical,
@@ -96,6 +97,7 @@ class SequenceRecord:
                     "frame": int(self.frames[k]),
                     "split": self.split,
                     "name": f"{self.seq_id}@{int(self.frames[k])}",
+                    **({"pose_mode": modes[k]} if len(modes) == len(self.frames) else {}),
                 },
             )
             for k in range(len(self.frames))

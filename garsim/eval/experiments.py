@@ -8,6 +8,7 @@ from __future__ import annotations
 import dataclasses
 import os
 from collections import defaultdict
+from collections.abc import Callable, Sequence
 from typing import Any
 
 import numpy as np
@@ -28,6 +29,28 @@ POSTPROCESS_OPTIMISES: dict[str, tuple[str, ...]] = {
 always has them): the push-out moves vertices out along the soft anchor's blend of body vertex normals
 (DeePSD's test); refinement projects onto the closest point of the body's triangles (HOOD's and the
 winding-number test) and keeps edge samples outside (edge crossings)."""
+
+
+GROUPS: dict[str, Callable[[Sample], str]] = {
+    "family": lambda s: s.garment_type,
+    "construction": lambda s: str(s.meta.get("construction", "unknown")),
+    "canonical_pose": lambda s: str(s.meta.get("canonical_pose", "unknown")),
+    "pose_mode": lambda s: str(s.meta.get("pose_mode", "unknown")),
+    "fabric": lambda s: str(s.meta.get("fabric_name", s.fabric)),
+    "paired": lambda s: "paired" if s.meta.get("paired") else "single",
+}
+"""What results can be grouped by (``score_predictions(by=...)``): the garment family, its construction
+(template / implicit), the canonical pose (tpose / apose / between), the target pose's sampling mode (everyday /
+walk / wide), the fabric name (custom: physical values between the presets) and whether the sample belongs to a
+paired-fabric group; "unknown" where a sample's metadata predates the key."""
+
+
+def sample_groups(sample: Sample, by: Sequence[str]) -> list[str]:
+    """The row labels of ``sample`` under each grouping of ``by``: the family as it is, any other ``key=value``."""
+    unknown = [k for k in by if k not in GROUPS]
+    if unknown:
+        raise ValueError(f"cannot group results by {unknown}; choose from {sorted(GROUPS)}")
+    return [GROUPS[k](sample) if k == "family" else f"{k}={GROUPS[k](sample)}" for k in by]
 
 
 def _predict_all(model: Any, samples: list[Sample], batch: int = 16) -> list[np.ndarray]:
@@ -63,8 +86,10 @@ def evaluate_split(
     refine: bool = False,
     name: str = "garsim",
     baselines: bool = True,
+    by: Sequence[str] = ("family",),
 ) -> dict[str, dict[str, dict[str, float]]]:
-    """Mean metrics per garment type (and 'all') for the model and for the baselines.
+    """Mean metrics per garment type (or the groupings ``by``, see ``GROUPS``) and 'all' for the model and for
+    the baselines.
 
     Returns {method: {garment_type: {metric: value, "frames": n}}} with methods ``name`` (the raw network
     output of ``model``, which has ``predict(samples)``), ``name+push`` (with the API's collision post-process,
@@ -95,13 +120,14 @@ def evaluate_split(
             predictions[f"{name}+refine"] = [postprocess(p, s) for p, s in zip(predictions[name], samples)]
     if refine and baselines:
         predictions["prior+refine"] = [postprocess(p, s) for p, s in zip(predictions["prior"], samples)]
-    return score_predictions(samples, predictions)
+    return score_predictions(samples, predictions, by)
 
 
 def score_predictions(
-    samples: list[Sample], predictions: dict[str, list[np.ndarray]]
+    samples: list[Sample], predictions: dict[str, list[np.ndarray]], by: Sequence[str] = ("family",)
 ) -> dict[str, dict[str, dict[str, float]]]:
-    """{method: {garment_type: {metric: mean, "frames": n}}} (and 'all') of each method's predictions of the samples.
+    """{method: {group: {metric: mean, "frames": n}}} (and 'all') of each method's predictions of the samples;
+    groups are the garment types by default, ``sample_groups``' labels of the groupings ``by`` otherwise.
 
     Metrics: ``garsim.eval.metrics.GarmentMetrics`` and ``correction_alignment`` (its cosine and gain); a method
     named ``base+post`` (a post-processed row) leaves out the collision metrics its post-process enforces
@@ -119,8 +145,8 @@ def score_predictions(
             row = garment_metrics(p, s.target, s.garment_faces, s.body_target, s.body_faces).as_dict()
             row = {k: v for k, v in row.items() if k not in enforced}
             row["correction_cosine"], row["correction_gain"] = correction_alignment(p, s.prior, s.target)
-            rows[s.garment_type].append(row)
-            rows["all"].append(row)
+            for group in [*sample_groups(s, by), "all"]:
+                rows[group].append(row)
         results[method] = {
             kind: {**{k: float(np.mean([r[k] for r in rs])) for k in rs[0]}, "frames": len(rs)}
             for kind, rs in sorted(rows.items())
@@ -128,8 +154,8 @@ def score_predictions(
         jitter: dict[str, list[float]] = defaultdict(list)
         for idx in animations:
             value = jitter_mm(np.stack([preds[i] for i in idx]))
-            jitter[samples[idx[0]].garment_type].append(value)
-            jitter["all"].append(value)
+            for group in [*sample_groups(samples[idx[0]], by), "all"]:
+                jitter[group].append(value)
         for kind, values in jitter.items():
             results[method][kind].update(jitter_mm=float(np.mean(values)), sequences=len(values))
     return results
@@ -238,4 +264,21 @@ def format_table(results: dict[str, dict[str, dict[str, float]]]) -> str:
         for kind, m in per_type.items():
             cells = [format(m[k], f) if k in m else "-" for k, _, f in cols]
             lines.append(f"| {method} | {kind} | {m['frames']} | " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
+def format_group_table(results: dict[str, dict[str, dict[str, float]]], method: str) -> str:
+    """A Markdown table of one method's raw error beside the prior's per group (rows: 'all', then the groups in
+    order): frames, prior and method error (mm), their ratio, and the method's inside and edges-through %."""
+    prior, model = results["prior"], results[method]
+    lines = [
+        f"| group | frames | prior (mm) | {method} (mm) | ratio | inside (%) | edges through (%) |",
+        "|---|---|---|---|---|---|---|",
+    ]
+    for group in ["all", *sorted(k for k in model if k != "all")]:
+        p, m = prior[group]["euclidean_mm"], model[group]
+        lines.append(
+            f"| {group} | {m['frames']} | {p:.2f} | {m['euclidean_mm']:.2f} | {m['euclidean_mm'] / p:.3f} | "
+            f"{m['inside_pct']:.2f} | {m['edge_crossing_pct']:.2f} |"
+        )
     return "\n".join(lines)
