@@ -564,6 +564,14 @@ def cmd_train(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_average(args: argparse.Namespace) -> int:
+    from garsim.model.soup import average_models
+
+    weights = args.weights or [1.0 / len(args.models)] * len(args.models)
+    print(average_models(args.models, weights).save(args.out))
+    return 0
+
+
 def cmd_eval(args: argparse.Namespace) -> int:
     if args.out:
         _check_output(args.out, (".json",), "--out")
@@ -666,6 +674,7 @@ EXAMPLES: dict[str, str] = {
     "  garsim animate --garment skirt.obj --poses keyframes.json --interpolate 48 --out poses.usdc\n"
     "  garsim animate --garment g.obj --canonical a.obj --targets bodies/ --up y --units cm --out anim.pc2",
     "train": "garsim train --data ~/garsim-data/v4 --out runs/v1 --resolution low",
+    "average": "garsim average --models garsim/weights runs/finetune/best --weights 0.5 0.5 --out runs/soup",
     "eval": "garsim eval --data ~/garsim-data/v4test --model runs/v1/best --splits test ood --out results.json",
     "bench": "garsim bench --sizes 600 2400 --out bench.json",
     "data": "garsim data info ~/garsim-data/v4",
@@ -924,6 +933,12 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=cmd_train)
+
+    p = command("average", "average saved models tensor by tensor (a model and its fine-tune: WiSE-FT)")
+    p.add_argument("--models", nargs="+", required=True, help="two or more model folders of one config")
+    p.add_argument("--weights", type=float, nargs="+", help="one weight each, summing to 1 (default: equal)")
+    p.add_argument("--out", required=True, help="folder for the averaged model")
+    p.set_defaults(func=cmd_average)
 
     p = command("eval", "the paper's metrics on a dataset split: GarSim vs the LBS prior")
     p.add_argument("--data", required=True, help="dataset folder")
