@@ -71,7 +71,6 @@ def main() -> None:
     parser.add_argument("--external", nargs="*", default=[], help="further check.py --json files for the table")
     parser.add_argument("--bench", help="JSON written by `garsim bench --out`")
     parser.add_argument("--docs", default="docs")
-    parser.add_argument("--samples", type=int, default=6)
     args = parser.parse_args()
     docs = Path(args.docs)
     curve = docs / "training_curve.png"
@@ -80,9 +79,11 @@ def main() -> None:
     results, bench, full = _load(args.results), _load(args.bench), _load(args.results_full)
     sim = GarSim.load(args.model) if args.model else GarSim.pretrained()
     store = DatasetStore(args.data)
-    recs = [r for r in store.sequences("test")]
+    by_family: dict[str, list] = {}
+    for rec in store.sequences("test"):
+        by_family.setdefault(rec.garment_type, []).append(rec)
     rng = np.random.default_rng(0)
-    pick = [recs[i] for i in rng.choice(len(recs), size=min(args.samples, len(recs)), replace=False)]
+    pick = [recs[rng.integers(len(recs))] for _, recs in sorted(by_family.items())]  # one of every family
     panels, titles, colors = [], [], []
     for rec in pick:
         s = rec.samples("low")[-1]
@@ -90,8 +91,8 @@ def main() -> None:
         for name, verts in (("prior", s.prior), ("GarSim (raw)", pred), ("ground truth", s.target)):
             err = 1000 * np.linalg.norm(verts - s.target, axis=1)
             panels.append([(s.body_target, s.body_faces), (verts, s.garment_faces)])
-            colors.append([None, np.clip(err, 0, 100)])
-            titles.append(f"{rec.garment_type}/{rec.fabric} {name}: {err.mean():.0f} mm")
+            colors.append([None, err if name != "ground truth" else None])
+            titles.append(f"{rec.garment_type}/{rec.fabric} {name}" + (f": {err.mean():.0f} mm" if err.any() else ""))
     maps = render_grid(
         docs / "test_predictions.png",
         panels,
@@ -99,7 +100,10 @@ def main() -> None:
         titles=titles,
         views=("front",),
         colors=colors,
-        suptitle="Test split: error to Newton per vertex, 0-100 mm",
+        suptitle="Test split, one sample of every family: error to Newton per vertex",
+        vmin=0.0,
+        vmax=100.0,
+        colorbar_label="error to Newton (mm; 100 and above at the top)",
     )
     parts = [
         f"# GarSim results\n\nModel: `{results['model']}`; data: `{args.data}` ({results['resolution']} resolution).",

@@ -116,6 +116,36 @@ def test_render_grid_layout(tmp_path):
     assert grid.shape[0] == pytest.approx(2 * (100 + 24), abs=2)
 
 
+def test_render_grid_shares_one_colour_range_and_draws_its_bar(tmp_path):
+    """Two panels whose scalars span 0-10 and 0-100: on the shared 0-100 range the first is all dark (viridis'
+    low end), on its own range it is not; the bar adds a strip under the grid; a bar without a range is refused."""
+    box = _box((0.5, 0.3, 1.0))
+    n = len(box[0])
+    low, high = np.linspace(0.0, 10.0, n), np.linspace(0.0, 100.0, n)
+    own = imread(render_grid(tmp_path / "own.png", [[box], [box]], ncols=2, size=100, colors=[[low], [high]]))
+    shared = render_grid(
+        tmp_path / "shared.png",
+        [[box], [box]],
+        ncols=2,
+        size=100,
+        colors=[[low], [high]],
+        vmin=0.0,
+        vmax=100.0,
+        colorbar_label="error (mm)",
+    )
+    shared = imread(shared)
+    assert shared.shape[0] == pytest.approx(own.shape[0] + 70, abs=2)
+    first = np.s_[: own.shape[0], : own.shape[1] // 2]
+
+    def green(im: np.ndarray) -> float:  # mean green of the first panel's box: viridis' high end is green-yellow
+        panel = im[first][..., :3]
+        return float(panel[_silhouette(panel)][:, 1].mean())
+
+    assert green(shared) < green(own) - 0.2
+    with pytest.raises(ValueError, match="vmin and vmax"):
+        render_grid(tmp_path / "x.png", [[box]], colors=[[low]], colorbar_label="error (mm)")
+
+
 def test_bad_arguments(tmp_path):
     box = _box((1.0, 1.0, 1.0))
     with pytest.raises(ValueError, match="PNG"):

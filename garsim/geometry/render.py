@@ -423,11 +423,19 @@ def render_grid(
     size: int = 384,
     colors: Sequence[Any] | None = None,
     suptitle: str | None = None,
+    cmap: str = "viridis",
+    vmin: float | None = None,
+    vmax: float | None = None,
+    colorbar_label: str | None = None,
 ) -> Path:
     """Write a PNG grid of panels; each panel is an image (H, W, 3|4) or a list of meshes rendered in ``views``.
 
-    ``colors`` (optional) gives per-panel mesh colours for mesh panels, as in :func:`render_image`.
+    ``colors`` (optional) gives per-panel mesh colours for mesh panels, as in :func:`render_image`; scalars are
+    mapped over [``vmin``, ``vmax``] (default: each panel's own range). ``colorbar_label`` (with both bounds)
+    adds a horizontal colour bar of that range under the grid.
     """
+    import matplotlib.colors as mcolors
+    from matplotlib.cm import ScalarMappable
     from matplotlib.figure import Figure
 
     p = _check_png(path)
@@ -439,13 +447,16 @@ def render_grid(
         raise ValueError(f"got {len(titles)} titles for {len(panels)} panels")
     if colors is not None and len(colors) != len(panels):
         raise ValueError(f"got {len(colors)} colour entries for {len(panels)} panels")
+    if colorbar_label is not None and (vmin is None or vmax is None):
+        raise ValueError("a colour bar needs both vmin and vmax (the range every panel shares)")
     images = []
     for i, panel in enumerate(panels):
         arr = np.asarray(panel) if isinstance(panel, np.ndarray) else None
         if arr is not None and arr.ndim == 3 and arr.shape[2] in (3, 4):
             images.append(arr)
         else:
-            images.append(render_image(panel, views, None if colors is None else colors[i], size))
+            color = None if colors is None else colors[i]
+            images.append(render_image(panel, views, color, size, cmap=cmap, vmin=vmin, vmax=vmax))
     ncols = min(ncols, len(images))
     nrows = math.ceil(len(images) / ncols)
     cell_h = max(im.shape[0] for im in images)
@@ -453,10 +464,9 @@ def render_grid(
     dpi = 100.0
     title_h = 24 if titles is not None else 0
     top = 30 if suptitle else 0
-    fig_w = ncols * cell_w / dpi
-    fig_h = (nrows * (cell_h + title_h) + top) / dpi
-    fig = Figure(figsize=(fig_w, fig_h), dpi=dpi)
-    total_h = nrows * (cell_h + title_h) + top
+    bottom = 70 if colorbar_label is not None else 0
+    total_h = nrows * (cell_h + title_h) + top + bottom
+    fig = Figure(figsize=(ncols * cell_w / dpi, total_h / dpi), dpi=dpi)
     for i, im in enumerate(images):
         r, c = divmod(i, ncols)
         y0 = total_h - top - (r + 1) * (cell_h + title_h)
@@ -476,5 +486,9 @@ def render_grid(
             )
     if suptitle:
         fig.text(0.5, 1.0 - 0.5 * top / total_h, suptitle, ha="center", va="center", fontsize=12)
+    if colorbar_label is not None:
+        cax = fig.add_axes((0.2, 44 / total_h, 0.6, 14 / total_h))  # its ticks and label below it
+        sm = ScalarMappable(norm=mcolors.Normalize(vmin, vmax), cmap=cmap)
+        fig.colorbar(sm, cax=cax, orientation="horizontal").set_label(colorbar_label)
     _atomic_savefig(fig, p, dpi)
     return p
