@@ -101,6 +101,14 @@ def _config_default(action: argparse.Action, module: str, cls: str, name: str) -
     action.config_default = (module, cls, name)  # type: ignore[attr-defined]
 
 
+def _grouping(text: str) -> str:
+    """``garsim eval --by``: a grouping key of GROUP_CHOICES, or keys crossed as ``a/b``."""
+    unknown = [k for k in text.split("/") if k not in GROUP_CHOICES]
+    if unknown:
+        raise argparse.ArgumentTypeError(f"cannot group by {unknown}; choose from {', '.join(GROUP_CHOICES)}")
+    return text
+
+
 def _check_output(path: str | os.PathLike, extensions: tuple[str, ...], flag: str) -> Path:
     """Fail before any work when ``path`` has another extension or its folder cannot be written."""
     from garsim.atomic import check_writable_folder
@@ -949,9 +957,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument(
         "--by",
         nargs="+",
-        choices=GROUP_CHOICES,
+        type=_grouping,
         default=["family"],
-        help="group the rows by these (each a set of rows beside 'all'; default: the garment family)",
+        metavar="KEY",
+        help=f"group the rows by these ({', '.join(GROUP_CHOICES)}, or two crossed as a/b, e.g. family/construction; "
+        "each a set of rows beside 'all'; default: the garment family)",
     )
     p.add_argument("--out", help="write the results to this .json file")
     p.set_defaults(func=cmd_eval)

@@ -743,3 +743,11 @@ def test_animate_records_model_and_smoothing_in_the_file(tmp_path, anny_body):
     assert meta["model"] == "skinning prior" and meta["temporal_smoothing_frames"] == 0.0
     assert main([*base, "--smoothing", "-1", "--out", str(tmp_path / "b.usda")]) == 2
     assert not (tmp_path / "b.usda").exists()
+
+
+def test_eval_by_takes_keys_and_crossed_keys_and_refuses_others(capsys):
+    args = build_parser().parse_args(["eval", "--data", "d", "--by", "family/construction", "canonical_pose"])
+    assert args.by == ["family/construction", "canonical_pose"]
+    with pytest.raises(SystemExit) as exc:
+        build_parser().parse_args(["eval", "--data", "d", "--by", "family/colour"])
+    assert exc.value.code == 2 and "cannot group by ['colour']" in capsys.readouterr().err

@@ -76,8 +76,10 @@ def test_rows_grouped_by_canonical_pose_construction_and_pose_mode(tmp_path):
     assert table.splitlines()[3].startswith("| canonical_pose=apose | 2 | 10.00 |")
     untagged = evaluate_split(None, _store(tmp_path / "plain"), "test", by=("canonical_pose", "fabric"))["prior"]
     assert set(untagged) == {"all", "canonical_pose=unknown", "fabric=silk", "fabric=denim"}
+    crossed = evaluate_split(None, root, "test", by=("family/construction",))["prior"]
+    assert set(crossed) == {"all", "family/construction=skirt/implicit", "family/construction=top/template"}
     with pytest.raises(ValueError, match="cannot group results by \\['colour'\\]"):
-        evaluate_split(None, root, "test", by=("colour",))
+        evaluate_split(None, root, "test", by=("family/colour",))
 
 
 def test_post_processed_rows_leave_out_what_their_post_process_enforces(tmp_path):

@@ -46,11 +46,15 @@ paired-fabric group; "unknown" where a sample's metadata predates the key."""
 
 
 def sample_groups(sample: Sample, by: Sequence[str]) -> list[str]:
-    """The row labels of ``sample`` under each grouping of ``by``: the family as it is, any other ``key=value``."""
-    unknown = [k for k in by if k not in GROUPS]
+    """The row labels of ``sample`` under each grouping of ``by``: the family as it is, any other ``key=value``;
+    a crossed grouping ``a/b`` (e.g. ``family/construction``) gives ``a/b=value_a/value_b``."""
+    unknown = sorted({k for key in by for k in key.split("/") if k not in GROUPS})
     if unknown:
-        raise ValueError(f"cannot group results by {unknown}; choose from {sorted(GROUPS)}")
-    return [GROUPS[k](sample) if k == "family" else f"{k}={GROUPS[k](sample)}" for k in by]
+        raise ValueError(f"cannot group results by {unknown}; choose from {sorted(GROUPS)}, or cross them as a/b")
+    return [
+        GROUPS[key](sample) if key == "family" else f"{key}={'/'.join(GROUPS[k](sample) for k in key.split('/'))}"
+        for key in by
+    ]
 
 
 def _predict_all(model: Any, samples: list[Sample], batch: int = 16) -> list[np.ndarray]:
