@@ -25,11 +25,11 @@ DEMO_BODIES: dict[str, dict[str, float]] = {
 # (offset-surface) construction for the long-sleeve top, which has no template
 DEMO_GARMENTS: dict[str, tuple[str, str]] = {
     "skirt": ("silk", "template"),
-    "top": ("cotton", "template"),
-    "tshirt": ("cotton", "template"),
+    "top": ("cotton", "implicit"),
+    "tshirt": ("cotton", "implicit"),
     "longsleeve": ("cotton", "implicit"),
     "trousers": ("denim", "template"),
-    "dress": ("silk", "template"),
+    "dress": ("silk", "implicit"),
 }
 ANIMATED: tuple[str, str, str] = ("slim", "dress", "walk")  # body, garment, motion of the animation
 
