@@ -8,6 +8,7 @@ trained under one protocol (data, split, schedule, seed) and scored per garment 
     .venv/bin/python examples/experiments.py resolution $ARGS --budget 30
     .venv/bin/python examples/experiments.py scaling $ARGS --budget 30
     .venv/bin/python examples/experiments.py corrections $ARGS --model DIR
+    .venv/bin/python examples/experiments.py capacity $ARGS --budget 100 --config garsim/weights/config.json
 
 Each writes <out>/<study>.json and <out>/<study>.md (its tables, headed by the command). Trained models go to
 <out>/models/<key>/, keyed by what decides them, so a variant several studies share (the base model trained on
@@ -30,6 +31,7 @@ from garsim.eval import studies
 from garsim.eval.experiments import format_table
 from garsim.model.baselines import load_model
 from garsim.model.config import HEADS, GarSimConfig
+from garsim.model.weights import read_model_config
 from garsim.train.trainer import TrainConfig
 
 EXTERNAL = Path(__file__).resolve().parents[2] / "shared" / "external-eval" / "check.py"
@@ -40,7 +42,17 @@ TITLES = {
     "resolution": "Resolution: trained at low resolution, tested at 1x-8x",
     "scaling": "Data scaling: error vs training-set size",
     "corrections": "Corrections over the prior (Fig. 8)",
+    "capacity": "Capacity: wider and deeper networks on the families v0.7 underfits",
 }
+
+
+def _size(text: str) -> tuple[int, int]:
+    """``WIDTH:L`` of ``capacity --sizes``."""
+    width, _, steps = text.partition(":")
+    try:
+        return int(width), int(steps)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected WIDTH:L (e.g. 128:5), got {text!r}") from None
 
 
 def parser() -> argparse.ArgumentParser:
@@ -56,7 +68,10 @@ def parser() -> argparse.ArgumentParser:
     common.add_argument("--lr", type=float, default=TrainConfig.lr)
     common.add_argument("--threads", type=int, default=TrainConfig.threads, help="torch threads")
     common.add_argument("--device", default=TrainConfig.device)
-    common.add_argument("--config", help="base model: a GarSimConfig JSON file (default: GarSimConfig())")
+    common.add_argument(
+        "--config",
+        help="base model: a GarSimConfig JSON file or a saved model's config.json (default: GarSimConfig())",
+    )
     common.add_argument("--split", default="test", help="split scored")
     common.add_argument("--val-every", type=int, default=10, help="hold out every N-th training job")
     common.add_argument("--quiet", action="store_true", help="no progress bars")
@@ -75,6 +90,16 @@ def parser() -> argparse.ArgumentParser:
     s = sub.add_parser("scaling", parents=[common], help=TITLES["scaling"])
     s.add_argument("--fractions", nargs="+", type=float, default=list(studies.FRACTIONS))
     s.add_argument("--external", default=str(EXTERNAL), help="external set's check.py (skipped when absent)")
+    s = sub.add_parser("capacity", parents=[common], help=TITLES["capacity"])
+    s.add_argument(
+        "--sizes",
+        nargs="+",
+        type=_size,
+        default=list(studies.SIZES),
+        metavar="WIDTH:L",
+        help="variants: latent and MLP width, message-passing steps",
+    )
+    s.add_argument("--families", nargs="+", choices=GARMENT_TYPES, default=list(studies.UPPER_BODY))
     s = sub.add_parser("corrections", parents=[common], help=TITLES["corrections"])
     s.add_argument("--model", help="a trained model folder (default: train the base model)")
     s.add_argument("--per-family", type=int, default=1, help="random samples rendered per family")
@@ -95,7 +120,7 @@ def study_config(args: argparse.Namespace) -> studies.StudyConfig:
         device=args.device,
         progress=not args.quiet,
     )
-    model = GarSimConfig.from_json(args.config) if args.config else GarSimConfig()
+    model = read_model_config(args.config)[0] if args.config else GarSimConfig()
     return studies.StudyConfig(
         args.data, train, model, split=args.split, val_every=args.val_every, test_data=args.test_data
     )
@@ -110,6 +135,8 @@ def run(args: argparse.Namespace) -> tuple[dict[str, Any], list[str]]:
         result = studies.deepsd_comparison(study, args.resolutions)
     elif args.study == "generalisation":
         result = studies.generalisation(study, args.families)
+    elif args.study == "capacity":
+        result = studies.capacity(study, args.sizes, args.families)
     elif args.study == "scaling":
         external = args.external if Path(args.external).exists() else None
         if external is None:
@@ -134,6 +161,12 @@ def run(args: argparse.Namespace) -> tuple[dict[str, Any], list[str]]:
         + studies.family_table(result["results"], seen=result.get("seen", ())),
         "Every metric:\n\n" + format_table(result["results"]),
     ]
+    if "fit" in result:
+        sections.insert(
+            1,
+            "On the samples each variant was trained on (fit), mean Euclidean error (mm):\n\n"
+            + studies.family_table(result["fit"]),
+        )
     if "levels" in result:
         sections.insert(
             0,

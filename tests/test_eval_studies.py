@@ -11,6 +11,7 @@ import pytest
 from garsim.data.store import DatasetStore
 from garsim.eval.studies import (
     StudyConfig,
+    capacity,
     data_scaling,
     deepsd_comparison,
     family_table,
@@ -65,6 +66,20 @@ def test_generalisation_trains_on_the_seen_families_only(tmp_path):
     assert (seen["train_sequences"], seen["val_sequences"]) == (1, 0)  # the fixture's one skirt job, no top
     assert every["train_sequences"] == 2 and set(out["results"]) == {*out["models"], *BASELINES}
     assert "skirt (trained on)" in family_table(out["results"], seen=out["seen"])
+
+
+def test_capacity_trains_each_size_on_the_families_and_scores_its_fit(tmp_path):
+    out = capacity(_study(tmp_path), sizes=((16, 1), (32, 2)), families=("skirt", "tshirt", "dress"))
+    labels = ["width 16, L=1", "width 32, L=2"]
+    assert list(out["results"])[:2] == labels and out["families"] == ["skirt", "tshirt", "dress"]
+    config = json.loads((Path(out["models"]["width 32, L=2"]["dir"]) / "config.json").read_text())
+    assert (config["latent"], config["mlp_hidden"], config["edge_latent"], config["num_steps"]) == (32, 32, 16, 2)
+    fit = out["fit"]
+    assert list(fit) == [*labels, "prior"]
+    trained = out["models"]["width 16, L=1"]["train_samples"]  # one-frame sequences, each with its rest sample
+    assert fit["prior"]["all"]["frames"] == trained // 2  # the fit is scored on the frames alone
+    assert set(fit["prior"]) <= {"all", "skirt", "tshirt", "dress"}
+    json.dumps(out)
 
 
 def test_data_scaling_with_the_external_check(tmp_path):

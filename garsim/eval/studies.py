@@ -36,6 +36,11 @@ from garsim.train.trainer import TrainConfig, Trainer
 STEPS: tuple[int, ...] = (0, 1, 3, 5, 8)
 """Message-passing steps L of the Table 2 analog (0: no message passing)."""
 SEEN_FAMILIES: tuple[str, ...] = ("skirt", "top")
+UPPER_BODY: tuple[str, ...] = ("top", "tshirt", "longsleeve")
+"""The families v0.7 underfits on its own training samples (docs/studies/breakdown.md)."""
+SIZES: tuple[tuple[int, int], ...] = ((64, 5), (128, 5), (64, 10))
+"""(latent and MLP width, message-passing steps L) of the capacity study's variants: v0.7's size, twice as wide,
+twice as deep."""
 """The paper's generalisation protocol trains on these families only."""
 FACTORS: tuple[int, ...] = (1, 2, 4, 8)
 """Resolutions scored, as multiples of the training (low) resolution's linear density."""
@@ -170,6 +175,30 @@ def generalisation(study: StudyConfig, seen: Sequence[str] = SEEN_FAMILIES) -> d
     every family, both scored per family (validation also holds only the seen families)."""
     label = f"trained on {' and '.join(seen)}"
     return {**_study(study, {label: {"families": tuple(seen)}, "trained on all families": {}}), "seen": list(seen)}
+
+
+def capacity(
+    study: StudyConfig, sizes: Sequence[tuple[int, int]] = SIZES, families: Sequence[str] = UPPER_BODY
+) -> dict[str, Any]:
+    """Whether the base model is too small for ``families``: variants of its width (node latent and MLP width,
+    the edge latent half of it) and message-passing steps L, trained under one protocol on ``families`` only, each
+    scored (raw network) on the split and, under "fit", on the very samples it was trained on."""
+    base = study.model
+    variants = {
+        f"width {w}, L={steps}": {
+            "model": dataclasses.replace(base, latent=w, mlp_hidden=w, edge_latent=w // 2, num_steps=steps),
+            "families": tuple(families),
+        }
+        for w, steps in sizes
+    }
+    out = _study(study, variants)
+    train, _ = train_val_samples(  # without the rest samples, whose prior is exact
+        study.data, study.resolution, study.val_every, rest=False, families=families, seed=study.train.seed
+    )
+    predictions = {label: load_model(info["dir"]).predict(train) for label, info in out["models"].items()}
+    out["fit"] = score_predictions(train, {**predictions, "prior": [s.prior for s in train]})
+    out["families"] = list(families)
+    return out
 
 
 def data_scaling(
