@@ -182,7 +182,8 @@ def capacity(
 ) -> dict[str, Any]:
     """Whether the base model is too small for ``families``: variants of its width (node latent and MLP width,
     the edge latent half of it) and message-passing steps L, trained under one protocol on ``families`` only, each
-    scored (raw network) on the split and, under "fit", on the very samples it was trained on."""
+    scored (raw network) on the split with its best checkpoint and, under "fit", with its last one on the very
+    samples it was trained on (what it can fit, whatever validation picks)."""
     base = study.model
     variants = {
         f"width {w}, L={steps}": {
@@ -195,7 +196,8 @@ def capacity(
     train, _ = train_val_samples(  # without the rest samples, whose prior is exact
         study.data, study.resolution, study.val_every, rest=False, families=families, seed=study.train.seed
     )
-    predictions = {label: load_model(info["dir"]).predict(train) for label, info in out["models"].items()}
+    last = {label: Path(info["dir"]).parent / "checkpoint" for label, info in out["models"].items()}
+    predictions = {label: load_model(folder).predict(train) for label, folder in last.items()}
     out["fit"] = score_predictions(train, {**predictions, "prior": [s.prior for s in train]})
     out["families"] = list(families)
     return out
