@@ -36,12 +36,12 @@ from garsim.train.trainer import TrainConfig, Trainer
 STEPS: tuple[int, ...] = (0, 1, 3, 5, 8)
 """Message-passing steps L of the Table 2 analog (0: no message passing)."""
 SEEN_FAMILIES: tuple[str, ...] = ("skirt", "top")
+"""The paper's generalisation protocol trains on these families only."""
 UPPER_BODY: tuple[str, ...] = ("top", "tshirt", "longsleeve")
 """The families v0.7 underfits on its own training samples (docs/studies/breakdown.md)."""
 SIZES: tuple[tuple[int, int], ...] = ((64, 5), (128, 5), (64, 10))
 """(latent and MLP width, message-passing steps L) of the capacity study's variants: v0.7's size, twice as wide,
 twice as deep."""
-"""The paper's generalisation protocol trains on these families only."""
 FACTORS: tuple[int, ...] = (1, 2, 4, 8)
 """Resolutions scored, as multiples of the training (low) resolution's linear density."""
 FRACTIONS: tuple[float, ...] = (0.25, 0.5, 1.0)

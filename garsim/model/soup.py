@@ -1,6 +1,6 @@
 """Weight-space averages of models fine-tuned from one another (a "model soup"; WiSE-FT, Wortsman et al. 2022):
-the average of a model and its fine-tune keeps most of what the fine-tune gained at a lower cost to what the
-model already did well, and runs as fast as either (one set of weights)."""
+the average of a model and its fine-tune keeps part of what the fine-tune gained at less cost to what the model
+already did well (docs/studies/soups.md), and runs as fast as either (one set of weights)."""
 
 from __future__ import annotations
 
