@@ -1,14 +1,17 @@
 """garsim.eval.goals: the model issue's bounds checked against hand-made results, and the report that states them."""
 
+import json
 import subprocess
 import sys
 from pathlib import Path
 
 import pytest
 
+from garsim.eval.experiments import evaluate_split
 from garsim.eval.goals import Goal, format_goals, model_goals
 
 ROOT = Path(__file__).resolve().parents[1]
+FIXTURE = ROOT / "tests" / "fixtures" / "dataset_v2"
 
 
 def _row(mm: float, inside: float = 0.0, through: float = 0.0) -> dict:
@@ -120,11 +123,15 @@ def test_make_report_writes_goals_from_the_committed_results(tmp_path):
     (docs / "studies").mkdir(parents=True)
     (docs / "studies" / "x.md").write_text("# A study\n")
     cmd = [sys.executable, str(ROOT / "examples" / "make_report.py"), "--data", str(ROOT / "tests/fixtures/dataset_v2")]
-    cmd += ["--results", str(ROOT / "docs/results.json"), "--docs", str(docs), "--samples", "1"]
+    cmd += ["--results", str(ROOT / "docs/results.json"), "--docs", str(docs)]
     cmd += ["--results-full", str(ROOT / "docs/results_full.json")]
     cmd += ["--external-default", str(ROOT / "docs/external_default.json"), "--bench", str(ROOT / "docs/bench.json")]
+    by = {"by": ["canonical_pose"], "test": evaluate_split(None, FIXTURE, "test", by=("canonical_pose",))}
+    (tmp_path / "by.json").write_text(json.dumps(by))
+    cmd += ["--results-by", str(tmp_path / "by.json")]
     subprocess.run(cmd, check=True, cwd=ROOT, capture_output=True)
     report = (docs / "results.md").read_text()
     assert "## Goals of the model issue" in report and "**missed**" in report
     assert "## test split at the simulated resolution" in report and "test split, full res.:" in report
     assert "- [A study](studies/x.md)" in report and (docs / "test_predictions.png").exists()
+    assert "## test split by canonical_pose (raw network)" in report and "| canonical_pose=" in report
