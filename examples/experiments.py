@@ -69,6 +69,12 @@ def parser() -> argparse.ArgumentParser:
     common.add_argument("--threads", type=int, default=TrainConfig.threads, help="torch threads")
     common.add_argument("--device", default=TrainConfig.device)
     common.add_argument(
+        "--collision-start",
+        type=int,
+        default=TrainConfig.collision_start_epoch,
+        help="epoch the collision term starts (default: once validation stops improving)",
+    )
+    common.add_argument(
         "--config",
         help="base model: a GarSimConfig JSON file or a saved model's config.json (default: GarSimConfig())",
     )
@@ -118,6 +124,7 @@ def study_config(args: argparse.Namespace) -> studies.StudyConfig:
         lr=args.lr,
         threads=args.threads,
         device=args.device,
+        collision_start_epoch=args.collision_start,
         progress=not args.quiet,
     )
     model = read_model_config(args.config)[0] if args.config else GarSimConfig()

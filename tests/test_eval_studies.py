@@ -221,3 +221,13 @@ def test_solver_convergence_budgets_keep_the_damping_per_second():
     assert (default.substeps, default.iterations, default.damping) == (base.substeps, base.iterations, base.damping)
     strict = module.budget_config("20x8", settle_speed=0.002, max_settle_frames=300)  # the stricter settling test
     assert (strict.settle_speed, strict.max_settle_frames, strict.substeps) == (0.002, 300, 20)
+
+
+def test_driver_protocol_takes_the_collision_start(driver, driver_args):
+    _, args = driver_args
+    parse = driver.parser().parse_args
+    assert driver.study_config(parse(["capacity", *args])).train.collision_start_epoch is None  # the patience rule
+    config = driver.study_config(parse(["capacity", *args, "--collision-start", "3", "--sizes", "32:2"]))
+    assert config.train.collision_start_epoch == 3 and parse(["capacity", *args, "--sizes", "32:2"]).sizes == [(32, 2)]
+    with pytest.raises(SystemExit):
+        parse(["capacity", *args, "--sizes", "wide"])
