@@ -91,8 +91,9 @@ def main() -> None:
         for name, verts in (("prior", s.prior), ("GarSim (raw)", pred), ("ground truth", s.target)):
             err = 1000 * np.linalg.norm(verts - s.target, axis=1)
             panels.append([(s.body_target, s.body_faces), (verts, s.garment_faces)])
-            colors.append([None, err if name != "ground truth" else None])
-            titles.append(f"{rec.garment_type}/{rec.fabric} {name}" + (f": {err.mean():.0f} mm" if err.any() else ""))
+            truth = name == "ground truth"  # drawn uncoloured, without an error
+            colors.append([None, None if truth else err])
+            titles.append(f"{rec.garment_type}/{rec.fabric} {name}" + ("" if truth else f": {err.mean():.0f} mm"))
     maps = render_grid(
         docs / "test_predictions.png",
         panels,

@@ -21,8 +21,9 @@ DEMO_BODIES: dict[str, dict[str, float]] = {
     "slim": {"gender": 0.1, "weight": 0.3, "height": 0.6},
     "broad": {"gender": 0.9, "weight": 0.75, "muscle": 0.7, "height": 0.45},
 }
-# garment -> (fabric, construction): the parametric templates where a builder exists, the implicit
-# (offset-surface) construction for the long-sleeve top, which has no template
+# garment -> (fabric, construction): the parametric templates for skirts and trousers; the implicit (offset-surface)
+# construction for the upper body, whose necklines and straps sit where a garment's do (the parametric t-shirt's
+# neckline reaches the armpit line) and for the long-sleeve top, which has no template
 DEMO_GARMENTS: dict[str, tuple[str, str]] = {
     "skirt": ("silk", "template"),
     "top": ("cotton", "implicit"),

@@ -141,15 +141,16 @@ def score_predictions(
     """
     results: dict[str, dict[str, dict[str, float]]] = {}
     animations = _animations(samples)
+    labels = [[*sample_groups(s, by), "all"] for s in samples]  # each sample's rows, the same for every method
     for method in sorted(predictions, key=lambda k: (k in ("prior", "nearest", "ground truth"), k)):
         preds = predictions[method]
         enforced = POSTPROCESS_OPTIMISES.get(method.partition("+")[2], ())
         rows: dict[str, list[dict[str, float]]] = defaultdict(list)
-        for s, p in zip(samples, preds):
+        for s, p, groups in zip(samples, preds, labels):
             row = garment_metrics(p, s.target, s.garment_faces, s.body_target, s.body_faces).as_dict()
             row = {k: v for k, v in row.items() if k not in enforced}
             row["correction_cosine"], row["correction_gain"] = correction_alignment(p, s.prior, s.target)
-            for group in [*sample_groups(s, by), "all"]:
+            for group in groups:
                 rows[group].append(row)
         results[method] = {
             kind: {**{k: float(np.mean([r[k] for r in rs])) for k in rs[0]}, "frames": len(rs)}
@@ -158,7 +159,7 @@ def score_predictions(
         jitter: dict[str, list[float]] = defaultdict(list)
         for idx in animations:
             value = jitter_mm(np.stack([preds[i] for i in idx]))
-            for group in [*sample_groups(samples[idx[0]], by), "all"]:
+            for group in labels[idx[0]]:
                 jitter[group].append(value)
         for kind, values in jitter.items():
             results[method][kind].update(jitter_mm=float(np.mean(values)), sequences=len(values))

@@ -8,8 +8,6 @@ import math
 from collections.abc import Sequence
 from pathlib import Path
 
-import torch
-
 from garsim.model.baselines import load_model
 from garsim.model.garsim import GraphModel
 
@@ -28,14 +26,8 @@ def average_models(directories: Sequence[str | Path], weights: Sequence[float]) 
             raise ValueError(
                 f"{d} is not the model of {directories[0]} (kind or config differs): they cannot be averaged"
             )
-    states = [m.state_dict() for m in models]
-    averaged = {}
-    for k, v in states[0].items():
-        if v.is_floating_point():
-            averaged[k] = sum(w * s[k].double() for w, s in zip(weights, states)).to(v.dtype)
-        elif all(torch.equal(v, s[k]) for s in states[1:]):
-            averaged[k] = v  # a count or index buffer: the same in every model
-        else:
-            raise ValueError(f"the models' {k!r} ({v.dtype}) differ and cannot be averaged")
-    first.load_state_dict(averaged)
+    states = [m.state_dict() for m in models]  # every tensor a float weight (GarSim and DeePSD have no buffers)
+    first.load_state_dict(
+        {k: sum(w * s[k].double() for w, s in zip(weights, states)).to(v.dtype) for k, v in states[0].items()}
+    )
     return first
