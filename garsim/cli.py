@@ -37,6 +37,8 @@ ANIMATION_OUTPUTS: tuple[str, ...] = (".glb", ".gltf", ".usd", ".usda", ".usdc",
 SINGLE_THREAD_COMMANDS: tuple[str, ...] = ("drape", "animate")
 _THREAD_VARS = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")
 _USER_ERRORS = (ValueError, OSError, RuntimeError)
+WIDENING_FLAGS = ("fabric_decoder_film", "global_context")
+"""GarSimConfig switches that `garsim train` can add to a model (new layers at zero, `GraphModel.widened`)."""
 """Exceptions reported as one line (MeshError and ExportError are ValueErrors; a missing, unreadable or
 unwritable file an OSError); anything else is a bug and keeps its traceback."""
 
@@ -561,11 +563,13 @@ def cmd_train(args: argparse.Namespace) -> int:
         train = MirrorAugmented(train)
     print(f"training on {len(train)} samples, validating on {len(val)} ({args.resolution} resolution)")
     model_config = init.config if init is not None else GarSimConfig(**({"head": args.head} if args.head else {}))
-    if args.fabric_decoder_film and cfg.model != "garsim":
-        raise ValueError(f"--fabric-decoder-film is a layer of GarSim; the {cfg.model!r} model has none")
-    if args.fabric_decoder_film and not model_config.fabric_decoder_film:
-        model_config = dataclasses.replace(model_config, fabric_decoder_film=True)
-        init = init.widened(model_config) if init is not None else None  # its new FiLM layer starts at zero
+    added = {k: True for k in WIDENING_FLAGS if getattr(args, k) and not getattr(model_config, k)}
+    if added and cfg.model != "garsim":
+        flag = "--" + next(iter(added)).replace("_", "-")
+        raise ValueError(f"{flag} is a layer of GarSim; the {cfg.model!r} model has none")
+    if added:
+        model_config = dataclasses.replace(model_config, **added)
+        init = init.widened(model_config) if init is not None else None  # its new layers start at zero
     history = Trainer(model_config, cfg, train, val or None, init=init).fit()
     if history:
         print(json.dumps(history[-1], indent=2))
@@ -931,6 +935,12 @@ def build_parser() -> argparse.ArgumentParser:
         action="store_true",
         help="a FiLM of the node latents by the fabric before the decoder (GarSimConfig.fabric_decoder_film); with "
         "--init, added to that model's weights at zero",
+    )
+    p.add_argument(
+        "--global-context",
+        action="store_true",
+        help="before each message-passing step, an MLP of the garment's pooled node latents added to every node "
+        "(GarSimConfig.global_context); with --init, added to that model's weights at zero",
     )
     p.add_argument(
         "--trainable",

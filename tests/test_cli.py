@@ -686,9 +686,10 @@ def test_train_on_some_families_only(tmp_path):
     assert (run / "best" / "model.safetensors").exists()
 
 
-def test_fine_tune_the_fabric_pathway_with_a_decoder_film_and_the_fold_term(tmp_path, capsys):
-    """`garsim train --init M --fabric-decoder-film --trainable ... --fold-weight`: the new FiLM layer is added to M's
-    weights, only the named parameters are trained (the rest keep M's values), and the run records its options."""
+def test_fine_tune_with_new_layers_and_the_fold_term(tmp_path, capsys):
+    """`garsim train --init M --fabric-decoder-film --global-context --trainable ... --fold-weight`: the new layers
+    are added to M's weights, only the named parameters are trained (the rest keep M's values), and the run records
+    its options."""
     from pathlib import Path
 
     from garsim.model.garsim import GarSimModel
@@ -703,20 +704,24 @@ def test_fine_tune_the_fabric_pathway_with_a_decoder_film_and_the_fold_term(tmp_
         "--init",
         str(base / "best"),
         "--fabric-decoder-film",
+        "--global-context",
         "--trainable",
         "processor.film",
+        "processor.glob",
         "decoder.fabric_film",
     ]
     assert main([*args, "--out", str(run), *tune, "--pair-weight", "5", "--fold-weight", "0.3", "--lr", "1e-2"]) == 0
     before, after = GarSimModel.load(base / "best"), GarSimModel.load(run / "checkpoint")
     assert after.config.fabric_decoder_film and not before.config.fabric_decoder_film
+    assert after.config.global_context and not before.config.global_context
     old, new = before.state_dict(), after.state_dict()
     assert all(torch.equal(v, new[k]) for k, v in old.items() if not k.startswith("processor.film"))
     assert any(not torch.equal(v, new[k]) for k, v in old.items() if k.startswith("processor.film"))
     assert new["decoder.fabric_film.weight"].abs().sum() > 0  # started at zero, trained
+    assert new["processor.glob.0.mlp.2.weight"].abs().sum() > 0
     cfg = json.loads((run / "train_config.json").read_text())
-    assert cfg["trainable"] == ["processor.film", "decoder.fabric_film"] and cfg["losses"]["fold"] == 0.3
-    deepsd = ["--out", str(tmp_path / "d"), "--model", "deepsd", "--fabric-decoder-film"]
+    assert cfg["trainable"] == ["processor.film", "processor.glob", "decoder.fabric_film"] and cfg["losses"]["fold"] == 0.3
+    deepsd = ["--out", str(tmp_path / "d"), "--model", "deepsd", "--global-context"]
     capsys.readouterr()
     assert main([*args, *deepsd]) == 2
     assert "layer of GarSim" in _one_error_line(capsys)

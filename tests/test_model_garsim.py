@@ -206,14 +206,59 @@ def test_mean_aggregator_matches_brute_force():
 
 
 def test_widened_model_keeps_the_weights_and_starts_its_new_layer_at_zero():
-    """``widened``: the same prediction with the decoder FiLM added (zero-initialised); a config that changes a
-    weight's shape is refused."""
+    """``widened``: the same prediction with the decoder FiLM and the global context added (zero-initialised); a
+    config that changes a weight's shape is refused."""
     import dataclasses
 
     model = GarSimModel(GarSimConfig(latent=16, edge_latent=8, mlp_hidden=16, num_steps=2)).eval()
-    wide = model.widened(dataclasses.replace(model.config, fabric_decoder_film=True))
+    wide = model.widened(dataclasses.replace(model.config, fabric_decoder_film=True, global_context=True))
     assert wide.config.fabric_decoder_film and wide.decoder.fabric_film.weight.abs().sum() == 0
+    assert len(wide.processor.glob) == 2 and all(g.mlp[-1].weight.abs().sum() == 0 for g in wide.processor.glob)
     sample = make_sample(fabric="denim")
     np.testing.assert_array_equal(wide.predict(sample), model.predict(sample))
     with pytest.raises(ValueError, match="no place"):
         model.widened(dataclasses.replace(model.config, latent=32))
+
+
+def test_graph_pool_takes_each_graphs_mean_and_max():
+    """Hand-computed: graph 0 holds rows (1, 4) and (3, 0), graph 1 the row (-2, 5); one graph = the batch of one."""
+    from garsim.model.processor import graph_pool
+
+    node = torch.tensor([[1.0, 4.0], [-2.0, 5.0], [3.0, 0.0]])
+    pooled = graph_pool(node, torch.tensor([0, 1, 0]), 2)
+    torch.testing.assert_close(pooled, torch.tensor([[2.0, 2.0, 3.0, 4.0], [-2.0, 5.0, -2.0, 5.0]]))
+    torch.testing.assert_close(graph_pool(node, None, 1), graph_pool(node, torch.zeros(3, dtype=torch.long), 1))
+
+
+def test_global_context_sees_the_whole_garment_but_not_the_other_graphs_of_a_batch():
+    """One message-passing step: a change of one vertex's prior reaches only its mesh 1-ring without the global
+    context and every vertex with it; batched with another garment, each prediction equals its own."""
+    import dataclasses
+
+    from scipy.sparse.csgraph import shortest_path
+
+    from garsim.geometry.mesh import unique_edges
+
+    torch.manual_seed(0)
+    cfg = GarSimConfig(latent=16, edge_latent=8, mlp_hidden=16, num_steps=1, head="displacement")
+    plain = GarSimModel(cfg).eval()
+    wide = plain.widened(dataclasses.replace(cfg, global_context=True))
+    with torch.no_grad():
+        wide.processor.glob[0].mlp[-1].weight.normal_(0.0, 0.3)
+    a, b = make_sample(fabric="silk"), make_sample(fabric="leather", seed=3)
+    poked = dataclasses.replace(a, prior=a.prior.copy())
+    poked.prior[0] += np.float32(0.01)
+    e = unique_edges(a.garment_faces)
+    n = len(a.garment)
+    adj = np.zeros((n, n))
+    adj[e[:, 0], e[:, 1]] = adj[e[:, 1], e[:, 0]] = 1
+    far = shortest_path(adj, unweighted=True, indices=0) >= 2
+    assert far.sum() > n // 2
+    moved = {
+        name: np.abs(m.predict(poked) - m.predict(a)).max(axis=1) for name, m in (("plain", plain), ("wide", wide))
+    }
+    assert moved["plain"][far].max() == 0.0
+    assert moved["wide"][far].min() > 0.0
+    both = wide.predict([a, b])
+    np.testing.assert_allclose(both[0], wide.predict(a), atol=1e-6)
+    np.testing.assert_allclose(both[1], wide.predict(b), atol=1e-6)

@@ -27,6 +27,7 @@ CONFIGS = {
     "displacement, relu, edge norm": dict(head="displacement", activation="relu", edge_layer_norm=True),
     "position, gelu, two layers": dict(head="position", activation="gelu", mlp_layers=2),
     "shared weights, no film, no residual": dict(share_weights=True, fabric_film=False, residual=False),
+    "displacement, global context": dict(head="displacement", global_context=True),
     "no message passing, no norm": dict(num_steps=0, layer_norm=False),
 }
 

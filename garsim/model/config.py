@@ -68,6 +68,10 @@ class GarSimConfig:
     fabric_film: bool = True  # the fabric's physical values also scale/shift every edge update (FiLM) and the magnitude
     # ... and the processed node latents before the decoder (FiLM that no LayerNorm follows; off in v0.7)
     fabric_decoder_film: bool = False
+    # global context (a deviation: the paper's processor passes messages along mesh edges only, so after L steps a
+    # vertex knows the garment within L edges; a top's hem cannot see the shoulders that lift it). Before each step
+    # every node gets an MLP of its graph's mean- and max-pooled latents (zero-initialised: off at the start)
+    global_context: bool = False
 
     def __post_init__(self) -> None:
         self.semantic_grid = tuple(int(v) for v in self.semantic_grid)  # type: ignore[assignment]

@@ -155,7 +155,7 @@ class GarSimModel(GraphModel):
         mu = self.body_encoder(x_body, data.delta, s)
         eta = self.node_encoder(chi, mu)
         pi = self.edge_encoder(data.edge_attr)
-        eta, _ = self.processor(eta, pi, data.edge_index, data.fabric)
+        eta, _ = self.processor(eta, pi, data.edge_index, data.fabric, None if single else batch, data.rot.shape[0])
         vec, direction, magnitude = self.decoder(eta, data.fabric)
         if single:  # R^T v for every row: body frame -> world
             world = vec @ data.rot[0].to(vec.dtype)

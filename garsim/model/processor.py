@@ -153,8 +153,37 @@ class MessagePassingStep(nn.Module):
         return new_node, new_edge
 
 
+def graph_pool(node: torch.Tensor, batch: torch.Tensor | None, num_graphs: int) -> torch.Tensor:
+    """(num_graphs, 2 d): the mean and the max of each graph's node rows (``batch``: graph id per node; None: one
+    graph). Both are invariant to the node order and continuous in the rows."""
+    if batch is None:
+        return torch.cat([node.mean(0), node.amax(0)])[None]
+    d = node.shape[1]
+    counts = torch.bincount(batch, minlength=num_graphs).clamp(min=1).to(node.dtype)
+    mean = node.new_zeros(num_graphs, d).index_add_(0, batch, node) / counts[:, None]
+    idx = batch[:, None].expand(-1, d)
+    peak = node.new_full((num_graphs, d), float("-inf")).scatter_reduce(0, idx, node, "amax", include_self=True)
+    return torch.cat([mean, peak], dim=1)
+
+
+class GlobalContext(nn.Module):
+    """``GarSimConfig.global_context``: an MLP of the graph's pooled node latents, added to every node's latent.
+    Its last layer starts at zero, so a model widened by it (``GraphModel.widened``) starts as it was."""
+
+    def __init__(self, cfg: GarSimConfig):
+        super().__init__()
+        self.mlp = MLP(2 * cfg.latent, cfg.mlp_hidden, cfg.latent, cfg.mlp_layers, cfg.activation, norm=False)
+        nn.init.zeros_(self.mlp[-1].weight)
+        nn.init.zeros_(self.mlp[-1].bias)
+
+    def forward(self, node: torch.Tensor, batch: torch.Tensor | None, num_graphs: int) -> torch.Tensor:
+        g = self.mlp(graph_pool(node, batch, num_graphs))
+        return node + (g if batch is None else g.index_select(0, batch))
+
+
 class Processor(nn.Module):
-    """L message-passing steps (unshared weights unless ``share_weights``)."""
+    """L message-passing steps (unshared weights unless ``share_weights``), each after a global-context update when
+    ``global_context``."""
 
     def __init__(self, cfg: GarSimConfig):
         super().__init__()
@@ -172,13 +201,24 @@ class Processor(nn.Module):
             for lin in self.film:
                 nn.init.zeros_(lin.weight)
                 nn.init.zeros_(lin.bias)
+        self.glob = nn.ModuleList([GlobalContext(cfg) for _ in range(n_blocks)]) if cfg.global_context else None
 
     def forward(
-        self, node: torch.Tensor, edge: torch.Tensor, edge_index: torch.Tensor, fabric: torch.Tensor | None = None
+        self,
+        node: torch.Tensor,
+        edge: torch.Tensor,
+        edge_index: torch.Tensor,
+        fabric: torch.Tensor | None = None,
+        batch: torch.Tensor | None = None,
+        num_graphs: int = 1,
     ) -> tuple[torch.Tensor, torch.Tensor]:
+        """L steps on node and edge latents; ``batch`` (graph id per node, None: one graph) and ``num_graphs`` scope
+        the global context."""
         mean = MeanAggregator(edge_index[1], node.shape[0]) if (self.mean and self.num_steps > 0) else None
         for l in range(self.num_steps):
             block = l % len(self.steps)
+            if self.glob is not None:
+                node = self.glob[block](node, batch, num_graphs)
             film = self.film[block](fabric) if (self.film is not None and fabric is not None) else None
             node, edge = self.steps[block](node, edge, edge_index, mean, own_edge=l > 0, film=film)
         return node, edge

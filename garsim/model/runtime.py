@@ -169,6 +169,7 @@ class GarSimRuntime:
                 _MLP(s, f"processor.steps.{i}.edge_update.rest.", act),
                 _MLP(s, f"processor.steps.{i}.node_update.", act),
                 (s[f"processor.film.{i}.weight"], s[f"processor.film.{i}.bias"]) if config.fabric_film else None,
+                _MLP(s, f"processor.glob.{i}.mlp.", act) if config.global_context else None,
             )
             for i in range(n_blocks)
         ]
@@ -251,7 +252,9 @@ class GarSimRuntime:
         gathered = np.empty_like(hid_buf)
         new_edge = np.empty_like(edge)
         for l in range(self.config.num_steps):
-            w_recv, b_recv, w_send, w_edge, rest, node_mlp, film = self.steps[l % len(self.steps)]
+            w_recv, b_recv, w_send, w_edge, rest, node_mlp, film, glob = self.steps[l % len(self.steps)]
+            if glob is not None:  # the graph's mean- and max-pooled latents, through an MLP, added to every node
+                node = node + glob(np.concatenate([node.mean(axis=0), node.max(axis=0)])[None])
             recv = _linear(node, w_recv, b_recv)  # node terms of the edge MLP's first layer, projected per node
             send = node @ w_send.T
             per_edge = None
