@@ -9,6 +9,7 @@ trained under one protocol (data, split, schedule, seed) and scored per garment 
     .venv/bin/python examples/experiments.py scaling $ARGS --budget 30
     .venv/bin/python examples/experiments.py corrections $ARGS --model DIR
     .venv/bin/python examples/experiments.py capacity $ARGS --budget 100 --config garsim/weights/config.json
+    .venv/bin/python examples/experiments.py oracle $ARGS --model garsim/weights   (trains nothing)
 
 Each writes <out>/<study>.json and <out>/<study>.md (its tables, headed by the command). Trained models go to
 <out>/models/<key>/, keyed by what decides them, so a variant several studies share (the base model trained on
@@ -43,6 +44,7 @@ TITLES = {
     "scaling": "Data scaling: error vs training-set size",
     "corrections": "Corrections over the prior (Fig. 8)",
     "capacity": "Capacity: wider and deeper networks on the families v0.7 underfits",
+    "oracle": "Smooth-correction oracle: how much of each family's error is finer than a length",
 }
 
 
@@ -110,6 +112,9 @@ def parser() -> argparse.ArgumentParser:
     s.add_argument("--model", help="a trained model folder (default: train the base model)")
     s.add_argument("--per-family", type=int, default=1, help="random samples rendered per family")
     s.add_argument("--size", type=int, default=512, help="image height in pixels")
+    s = sub.add_parser("oracle", parents=[common], help=TITLES["oracle"])
+    s.add_argument("--model", help="a trained model folder scored beside the oracle (default: none)")
+    s.add_argument("--sigmas", nargs="+", type=float, default=list(studies.SIGMAS), help="lengths in metres")
     return p
 
 
@@ -144,6 +149,11 @@ def run(args: argparse.Namespace) -> tuple[dict[str, Any], list[str]]:
         result = studies.generalisation(study, args.families)
     elif args.study == "capacity":
         result = studies.capacity(study, args.sizes, args.families)
+    elif args.study == "oracle":
+        result = studies.smooth_oracle(study, load_model(args.model) if args.model else None, args.sigmas)
+        return result, [
+            "Mean Euclidean error (mm) and its ratio to the prior's:\n\n" + studies.oracle_table(result["oracle"])
+        ]
     elif args.study == "scaling":
         external = args.external if Path(args.external).exists() else None
         if external is None:

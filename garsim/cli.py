@@ -536,6 +536,7 @@ def cmd_train(args: argparse.Namespace) -> int:
         "pair": args.pair_weight,
         "pair_smooth": args.pair_smooth,
         "fold": args.fold_weight,
+        "relative": args.relative_l2,
     }
     cfg = TrainConfig(
         out_dir=args.out,
@@ -911,6 +912,17 @@ def build_parser() -> argparse.ArgumentParser:
         ),
         *losses,
         "fold",
+    )
+    _config_default(
+        p.add_argument(
+            "--relative-l2",
+            type=float,
+            metavar="METRES",
+            help="weigh each sample's L2 term by this over its prior's mean error (floored at a quarter of it), so "
+            "tight garments count as much as loose ones; 0: off",
+        ),
+        *losses,
+        "relative",
     )
     p.add_argument("--restart", action="store_true", help="ignore an existing checkpoint in --out")
     _config_default(p.add_argument("--threads", type=int, help="torch threads per process"), *trainer, "threads")

@@ -720,7 +720,9 @@ def test_fine_tune_with_new_layers_and_the_fold_term(tmp_path, capsys):
     assert new["decoder.fabric_film.weight"].abs().sum() > 0  # started at zero, trained
     assert new["processor.glob.0.mlp.2.weight"].abs().sum() > 0
     cfg = json.loads((run / "train_config.json").read_text())
-    assert cfg["trainable"] == ["processor.film", "processor.glob", "decoder.fabric_film"] and cfg["losses"]["fold"] == 0.3
+    assert (
+        cfg["trainable"] == ["processor.film", "processor.glob", "decoder.fabric_film"] and cfg["losses"]["fold"] == 0.3
+    )
     deepsd = ["--out", str(tmp_path / "d"), "--model", "deepsd", "--global-context"]
     capsys.readouterr()
     assert main([*args, *deepsd]) == 2

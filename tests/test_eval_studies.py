@@ -18,6 +18,7 @@ from garsim.eval.studies import (
     generalisation,
     heads_and_steps,
     resolution_levels,
+    smooth_oracle,
     subdivide_level,
     train_variant,
 )
@@ -231,3 +232,35 @@ def test_driver_protocol_takes_the_collision_start(driver, driver_args):
     assert config.train.collision_start_epoch == 3 and parse(["capacity", *args, "--sizes", "32:2"]).sizes == [(32, 2)]
     with pytest.raises(SystemExit):
         parse(["capacity", *args, "--sizes", "wide"])
+
+
+def test_smooth_oracle_leaves_little_below_a_short_length_and_scores_the_model(tmp_path):
+    """A correction smoothed at 1 mm leaves almost nothing of the prior's error, a longer length leaves more; the
+    model's column is its mean error over the samples."""
+    import torch
+
+    from garsim.model.garsim import GarSimModel
+
+    torch.manual_seed(0)
+    model = GarSimModel(SMALL).eval()
+    out = smooth_oracle(_study(tmp_path), model, sigmas=(0.001, 0.05, 0.2))["oracle"]
+    assert set(out) == TEST_FAMILIES and list(out)[0] == "all"
+    samples = DatasetStore(FIXTURE).samples("test")
+    assert out["all"]["samples"] == len(samples)
+    for row in out.values():
+        assert row["oracle@0.001"] < 0.05 * row["prior"]
+        assert row["oracle@0.001"] < row["oracle@0.05"] < row["oracle@0.2"]
+    want = np.mean(
+        [1000 * np.linalg.norm(p - s.target, axis=1).mean() for p, s in zip(model.predict(samples), samples)]
+    )
+    assert out["all"]["model"] == pytest.approx(want)
+    prior = np.mean([1000 * np.linalg.norm(s.prior - s.target, axis=1).mean() for s in samples])
+    assert out["all"]["prior"] == pytest.approx(prior)
+    assert "model" not in smooth_oracle(_study(tmp_path), None, sigmas=(0.05,))["oracle"]["all"]
+
+
+def test_driver_oracle(driver, driver_args):
+    folder, args = driver_args
+    assert driver.main(["oracle", *args, "--sigmas", "0.02", "0.08"]) == 0
+    text = (folder / "oracle.md").read_text()
+    assert "| all |" in text and "oracle@0.08" in text and "(0." in text

@@ -11,6 +11,7 @@ from garsim.geometry.mesh import (
     face_areas,
     face_normals,
     face_pairs,
+    surface_smoother,
     top_border_loops,
     uniform_laplacian,
     unique_edges,
@@ -148,3 +149,24 @@ def test_top_border_loops_keeps_every_loop_reaching_the_top_band():
     assert [float(v[loop, 2].max()) for loop in loops] == pytest.approx([1.0, 0.98])
     assert top_border_loops(v, f, band=0.0)[0].max() < len(parts[0][0])
     assert top_border_loops(TET_V, TET_F) == []  # a closed surface has no border
+
+
+def test_surface_smoother_keeps_constants_and_spreads_a_spike_by_sigma():
+    """On a flat 1 cm grid: constant values are kept, a unit spike keeps its sum and spreads with a standard
+    deviation of sigma per axis, and a larger sigma spreads it further."""
+    n, h = 61, 0.01
+    x, y = np.meshgrid(np.arange(n) * h, np.arange(n) * h, indexing="ij")
+    v = np.stack([x.ravel(), y.ravel(), np.zeros(n * n)], axis=1)
+    idx = np.arange(n * n).reshape(n, n)
+    a, b, c, d = idx[:-1, :-1].ravel(), idx[1:, :-1].ravel(), idx[1:, 1:].ravel(), idx[:-1, 1:].ravel()
+    f = np.concatenate([np.stack([a, b, c], 1), np.stack([a, c, d], 1)])
+    centre = idx[n // 2, n // 2]
+    r2 = np.sum((v[:, :2] - v[centre, :2]) ** 2, axis=1)
+    for sigma in (0.02, 0.04):
+        smooth = surface_smoother(v, f, sigma)
+        np.testing.assert_allclose(smooth(np.full((n * n, 2), 3.0)), 3.0, atol=1e-9)
+        spike = np.zeros((n * n, 1))
+        spike[centre] = 1.0
+        out = smooth(spike)[:, 0]
+        assert out.sum() == pytest.approx(1.0, abs=1e-9)
+        assert np.sqrt(np.sum(out * r2) / 2.0) == pytest.approx(sigma, rel=0.02)

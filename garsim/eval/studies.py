@@ -26,6 +26,7 @@ from garsim.data.sample import Sample
 from garsim.data.store import DatasetStore, GarmentLevel, SequenceRecord
 from garsim.eval.experiments import evaluate_split, score_predictions
 from garsim.garments.remesh import subdivide, transfer_barycentric
+from garsim.geometry.mesh import surface_smoother
 from garsim.geometry.render import DEFAULT_COLORS, render_views
 from garsim.model.baselines import load_model
 from garsim.model.config import HEADS, GarSimConfig
@@ -44,6 +45,8 @@ SIZES: tuple[tuple[int, int], ...] = ((64, 5), (128, 5), (64, 10))
 twice as deep."""
 FACTORS: tuple[int, ...] = (1, 2, 4, 8)
 """Resolutions scored, as multiples of the training (low) resolution's linear density."""
+SIGMAS: tuple[float, ...] = (0.01, 0.02, 0.04, 0.08)
+"""Lengths (m) at which the smooth-correction oracle smooths the simulator's correction over the prior."""
 FRACTIONS: tuple[float, ...] = (0.25, 0.5, 1.0)
 """Shares of the training jobs of the data-scaling study."""
 RUN_ONLY_KEYS: tuple[str, ...] = ("out_dir", "progress", "resume", "threads", "checkpoint_every")
@@ -341,6 +344,44 @@ def corrections(study: StudyConfig, model: Any, per_family: int = 1, size: int =
                 }
             )
     return {"protocol": study.to_dict(), "samples": rows}
+
+
+def smooth_oracle(study: StudyConfig, model: Any = None, sigmas: Sequence[float] = SIGMAS) -> dict[str, Any]:
+    """What a prediction exact at every length above sigma would leave of the prior's error: per family and overall,
+    the mean Euclidean error (mm, mean over samples of the per-vertex mean) of G^prior + S_sigma(G_sim - G^prior),
+    the simulator's correction smoothed along the template's surface at about sigma (``surface_smoother``), beside
+    the prior's and the model's (when given). The rest is detail finer than sigma: folds and wrinkles."""
+    samples = DatasetStore(study.scored_data).samples(study.split, study.resolution)
+    if not samples:
+        raise ValueError(f"{study.scored_data}: no {study.split!r} samples")
+    preds = model.predict(samples) if model is not None else [None] * len(samples)
+    per: dict[str, list[dict[str, float]]] = defaultdict(list)
+    for s, pred in zip(samples, preds):
+        needed = np.asarray(s.target, np.float64) - s.prior
+        row = {"prior": 1000.0 * float(np.linalg.norm(needed, axis=1).mean())}
+        for sigma in sigmas:
+            rest = needed - surface_smoother(s.garment, s.garment_faces, sigma)(needed)
+            row[f"oracle@{sigma:g}"] = 1000.0 * float(np.linalg.norm(rest, axis=1).mean())
+        if pred is not None:
+            row["model"] = 1000.0 * float(np.linalg.norm(pred - s.target, axis=1).mean())
+        per[s.garment_type].append(row)
+        per["all"].append(row)
+    results = {
+        family: {"samples": len(rows), **{k: float(np.mean([r[k] for r in rows])) for k in rows[0]}}
+        for family, rows in sorted(per.items(), key=lambda kv: (kv[0] != "all", kv[0]))
+    }
+    return {"protocol": study.to_dict(), "sigmas": list(sigmas), "oracle": results}
+
+
+def oracle_table(oracle: dict[str, dict[str, float]]) -> str:
+    """A Markdown table of ``smooth_oracle``'s results: per family the prior's error (mm) and each column's error
+    with its ratio to the prior's."""
+    columns = [k for k in next(iter(oracle.values())) if k not in ("samples", "prior")]
+    lines = ["| family | samples | prior (mm) | " + " | ".join(columns) + " |", "|---|---|---|" + "---|" * len(columns)]
+    for family, row in oracle.items():
+        cells = [f"{row[k]:.2f} ({row[k] / row['prior']:.2f}x)" for k in columns]
+        lines.append(f"| {family} | {row['samples']} | {row['prior']:.2f} | " + " | ".join(cells) + " |")
+    return "\n".join(lines)
 
 
 def family_table(results: Results, metric: str = "euclidean_mm", fmt: str = ".2f", seen: Sequence[str] = ()) -> str:

@@ -93,6 +93,24 @@ def uniform_laplacian(faces: np.ndarray, num_vertices: int) -> sp.csr_matrix:
     return (sp.identity(num_vertices, format="csr") - sp.diags(inv) @ adj).tocsr()
 
 
+def surface_smoother(vertices: np.ndarray, faces: np.ndarray, sigma: float):
+    """A function that smooths (N, C) per-vertex values along the surface at about the length ``sigma`` (m): one
+    implicit heat step (I + t L)^-1 with t = sigma^2 / 2, L the graph Laplacian with weights 2 / (3 l^2) per edge of
+    length l (on an equilateral mesh the Laplace-Beltrami operator). Constant values stay constant."""
+    from scipy.sparse.linalg import splu
+
+    v = np.asarray(vertices, dtype=np.float64)
+    n = len(v)
+    e = unique_edges(faces)
+    w = (2.0 / 3.0) / np.maximum(np.sum((v[e[:, 0]] - v[e[:, 1]]) ** 2, axis=1), 1e-12)
+    adj = sp.coo_matrix(
+        (np.concatenate([w, w]), (np.concatenate([e[:, 0], e[:, 1]]), np.concatenate([e[:, 1], e[:, 0]]))), shape=(n, n)
+    ).tocsr()
+    lap = sp.diags(np.asarray(adj.sum(axis=1)).ravel()) - adj
+    solve = splu((sp.identity(n) + (0.5 * sigma * sigma) * lap).tocsc()).solve
+    return lambda values: solve(np.asarray(values, dtype=np.float64))
+
+
 def face_areas(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
     return 0.5 * np.linalg.norm(face_normals(vertices, faces, normalize=False), axis=1)
 
