@@ -571,6 +571,12 @@ def cmd_train(args: argparse.Namespace) -> int:
     if added:
         model_config = dataclasses.replace(model_config, **added)
         init = init.widened(model_config) if init is not None else None  # its new layers start at zero
+    if args.num_steps is not None and args.num_steps != model_config.num_steps:
+        if cfg.model != "garsim":
+            raise ValueError(f"--num-steps sets GarSim's message passing; the {cfg.model!r} model has none")
+        if init is not None:  # appended steps start as the identity
+            init = init.deepened(args.num_steps)
+        model_config = dataclasses.replace(model_config, num_steps=args.num_steps)
     history = Trainer(model_config, cfg, train, val or None, init=init).fit()
     if history:
         print(json.dumps(history[-1], indent=2))
@@ -953,6 +959,12 @@ def build_parser() -> argparse.ArgumentParser:
         action="store_true",
         help="before each message-passing step, an MLP of the garment's pooled node latents added to every node "
         "(GarSimConfig.global_context); with --init, added to that model's weights at zero",
+    )
+    p.add_argument(
+        "--num-steps",
+        type=int,
+        help="message-passing steps L of a new model; with --init, steps appended to that model's, each the "
+        "identity at first (default: GarSimConfig's, or the --init model's)",
     )
     p.add_argument(
         "--trainable",

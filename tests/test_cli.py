@@ -687,8 +687,8 @@ def test_train_on_some_families_only(tmp_path):
 
 
 def test_fine_tune_with_new_layers_and_the_fold_term(tmp_path, capsys):
-    """`garsim train --init M --fabric-decoder-film --global-context --trainable ... --fold-weight`: the new layers
-    are added to M's weights, only the named parameters are trained (the rest keep M's values), and the run records
+    """`garsim train --init M --fabric-decoder-film --global-context --num-steps 6 --trainable ... --fold-weight`: the
+    new layers and step are added to M's weights, only the named parameters are trained (the rest keep M's values), and the run records
     its options."""
     from pathlib import Path
 
@@ -705,6 +705,8 @@ def test_fine_tune_with_new_layers_and_the_fold_term(tmp_path, capsys):
         str(base / "best"),
         "--fabric-decoder-film",
         "--global-context",
+        "--num-steps",
+        "6",
         "--trainable",
         "processor.film",
         "processor.glob",
@@ -714,6 +716,7 @@ def test_fine_tune_with_new_layers_and_the_fold_term(tmp_path, capsys):
     before, after = GarSimModel.load(base / "best"), GarSimModel.load(run / "checkpoint")
     assert after.config.fabric_decoder_film and not before.config.fabric_decoder_film
     assert after.config.global_context and not before.config.global_context
+    assert (before.config.num_steps, after.config.num_steps) == (5, 6)
     old, new = before.state_dict(), after.state_dict()
     assert all(torch.equal(v, new[k]) for k, v in old.items() if not k.startswith("processor.film"))
     assert any(not torch.equal(v, new[k]) for k, v in old.items() if k.startswith("processor.film"))

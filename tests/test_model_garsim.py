@@ -220,6 +220,31 @@ def test_widened_model_keeps_the_weights_and_starts_its_new_layer_at_zero():
         model.widened(dataclasses.replace(model.config, latent=32))
 
 
+def test_deepened_model_starts_as_it_was_and_its_new_steps_learn():
+    """``deepened``: appended steps are the identity (the same prediction), their zeroed layers get gradients;
+    fewer steps or shared weights are refused."""
+    torch.manual_seed(0)
+    model = GarSimModel(GarSimConfig(latent=16, edge_latent=8, mlp_hidden=16, num_steps=2, head="displacement"))
+    model.eval()
+    deep = model.deepened(4)
+    sample = make_sample(fabric="denim")
+    assert deep.config.num_steps == 4 and len(deep.processor.steps) == 4
+    np.testing.assert_array_equal(deep.predict(sample), model.predict(sample))
+    deep.train()
+    graph = build_graph(sample, deep.config)
+    opt = torch.optim.SGD(deep.parameters(), lr=0.1)
+    for _ in range(2):  # first the new steps' output gains, then (through them) the rest of the steps
+        opt.zero_grad()
+        (deep(graph) - graph.target).square().sum().backward()
+        assert all(s.node_update[-1].weight.grad.abs().sum() > 0 for s in deep.processor.steps[2:])
+        opt.step()
+    assert all(s.edge_update.rest[-1].weight.grad.abs().sum() > 0 for s in deep.processor.steps[2:])
+    with pytest.raises(ValueError, match="append"):
+        model.deepened(1)
+    with pytest.raises(ValueError, match="shared"):
+        GarSimModel(GarSimConfig(latent=16, edge_latent=8, mlp_hidden=16, share_weights=True)).deepened(8)
+
+
 def test_graph_pool_takes_each_graphs_mean_and_max():
     """Hand-computed: graph 0 holds rows (1, 4) and (3, 0), graph 1 the row (-2, 5); one graph = the batch of one."""
     from garsim.model.processor import graph_pool

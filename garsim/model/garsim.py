@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 from collections.abc import Sequence
 from pathlib import Path
@@ -136,6 +137,24 @@ class GarSimModel(GraphModel):
         self.edge_encoder = EdgeEncoder(cfg)
         self.processor = Processor(cfg)
         self.decoder = Decoder(cfg)
+
+    def deepened(self, num_steps: int) -> GarSimModel:
+        """This model with message-passing steps appended up to ``num_steps``, each new step the identity at first
+        (the last layers of its edge and node updates at zero, so it adds nothing to the residual stream until
+        trained); raises ValueError for fewer steps or shared step weights."""
+        cfg = self.config
+        if num_steps < cfg.num_steps or cfg.share_weights:
+            raise ValueError(
+                f"can only append steps to a model with unshared steps: it has {cfg.num_steps}"
+                f"{' shared' if cfg.share_weights else ''}, asked for {num_steps}"
+            )
+        model = self.widened(dataclasses.replace(cfg, num_steps=num_steps))
+        with torch.no_grad():
+            for step in model.processor.steps[cfg.num_steps :]:
+                for layer in (step.edge_update.rest[-1], step.node_update[-1]):
+                    layer.weight.zero_()
+                    layer.bias.zero_()
+        return model
 
     def forward(self, data: Data, return_parts: bool = False):
         """Predicted garment vertices (N, 3) in world coordinates; with ``return_parts`` also a dict of
