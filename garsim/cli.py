@@ -37,10 +37,10 @@ ANIMATION_OUTPUTS: tuple[str, ...] = (".glb", ".gltf", ".usd", ".usda", ".usdc",
 SINGLE_THREAD_COMMANDS: tuple[str, ...] = ("drape", "animate")
 _THREAD_VARS = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")
 _USER_ERRORS = (ValueError, OSError, RuntimeError)
-WIDENING_FLAGS = ("fabric_decoder_film", "global_context")
-"""GarSimConfig switches that `garsim train` can add to a model (new layers at zero, `GraphModel.widened`)."""
 """Exceptions reported as one line (MeshError and ExportError are ValueErrors; a missing, unreadable or
 unwritable file an OSError); anything else is a bug and keeps its traceback."""
+WIDENING_FLAGS = ("fabric_decoder_film", "global_context")
+"""GarSimConfig switches that `garsim train` can add to a model (new layers at zero, `GraphModel.widened`)."""
 
 
 class _HelpFormatter(argparse.RawDescriptionHelpFormatter):

@@ -688,8 +688,8 @@ def test_train_on_some_families_only(tmp_path):
 
 def test_fine_tune_with_new_layers_and_the_fold_term(tmp_path, capsys):
     """`garsim train --init M --fabric-decoder-film --global-context --num-steps 6 --trainable ... --fold-weight`: the
-    new layers and step are added to M's weights, only the named parameters are trained (the rest keep M's values), and the run records
-    its options."""
+    new layers and step are added to M's weights, only the named parameters are trained (the rest keep M's values),
+    and the run records its options."""
     from pathlib import Path
 
     from garsim.model.garsim import GarSimModel

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import numpy as np
 import scipy.sparse as sp
 
@@ -93,7 +95,7 @@ def uniform_laplacian(faces: np.ndarray, num_vertices: int) -> sp.csr_matrix:
     return (sp.identity(num_vertices, format="csr") - sp.diags(inv) @ adj).tocsr()
 
 
-def surface_smoother(vertices: np.ndarray, faces: np.ndarray, sigma: float):
+def surface_smoother(vertices: np.ndarray, faces: np.ndarray, sigma: float) -> Callable[[np.ndarray], np.ndarray]:
     """A function that smooths (N, C) per-vertex values along the surface at about the length ``sigma`` (m): one
     implicit heat step (I + t L)^-1 with t = sigma^2 / 2, L the graph Laplacian with weights 2 / (3 l^2) per edge of
     length l (on an equilateral mesh the Laplace-Beltrami operator). Constant values stay constant."""

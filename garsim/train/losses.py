@@ -54,8 +54,8 @@ class LossWeights:
     pair: float = 0.0  # weight of the paired-fabric term (ours, ``fabric_pair_loss``); 0: off, as in the paper
     pair_smooth: int = 0  # smoothing rounds of that term's residual over the mesh (``fabric_pair_loss``); 0: none
     fold: float = 0.0  # weight of the fold-depth term (ours, ``fold_loss``); 0: off, as in the paper
-    relative: float = 0.0  # m; > 0: each graph's L2 term times this over its prior's mean error (floored at a
-    # quarter of it), so garments the prior already fits well weigh as much as loose ones (ours); 0: off
+    relative: float = 0.0  # m; > 0: each graph's L2 term weighs this over its prior's mean error (floored at a
+    # quarter of it) in the total, so garments the prior already fits well weigh as much as loose ones (ours); 0: off
 
 
 def _graph_ids(data: Data) -> tuple[torch.Tensor, int]:
@@ -269,12 +269,13 @@ def garsim_loss(
         "sm": laplacian_loss(pred, data.edge_index, batch, num_graphs),
         "nc": normal_consistency_loss(pred, data.faces, data.face_pairs, batch, num_graphs),
     }
+    l2 = terms["l2"]  # reported as it is (mean error), weighed in the total
     if w.relative > 0:
         prior_err = scatter(
             torch.linalg.vector_norm(data.prior - data.target, dim=-1), batch, dim=0, dim_size=num_graphs, reduce="mean"
         )
-        terms["l2"] = terms["l2"] * (w.relative / prior_err.clamp_min(0.25 * w.relative))
-    total = w.l2 * terms["l2"] + w.sm * terms["sm"] + w.nc * terms["nc"]
+        l2 = l2 * (w.relative / prior_err.clamp_min(0.25 * w.relative))
+    total = w.l2 * l2 + w.sm * terms["sm"] + w.nc * terms["nc"]
     if direction is not None and magnitude is not None and w.dir > 0:
         terms["dir"] = direction_loss(direction, magnitude, data, batch, num_graphs)
         total = total + w.dir * terms["dir"]
