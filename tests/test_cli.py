@@ -712,7 +712,8 @@ def test_fine_tune_with_new_layers_and_the_fold_term(tmp_path, capsys):
         "processor.glob",
         "decoder.fabric_film",
     ]
-    assert main([*args, "--out", str(run), *tune, "--pair-weight", "5", "--fold-weight", "0.3", "--lr", "1e-2"]) == 0
+    losses = ["--pair-weight", "5", "--fold-weight", "0.3", "--relative-l2", "0.03"]
+    assert main([*args, "--out", str(run), *tune, *losses, "--lr", "1e-2"]) == 0
     before, after = GarSimModel.load(base / "best"), GarSimModel.load(run / "checkpoint")
     assert after.config.fabric_decoder_film and not before.config.fabric_decoder_film
     assert after.config.global_context and not before.config.global_context
@@ -723,9 +724,8 @@ def test_fine_tune_with_new_layers_and_the_fold_term(tmp_path, capsys):
     assert new["decoder.fabric_film.weight"].abs().sum() > 0  # started at zero, trained
     assert new["processor.glob.0.mlp.2.weight"].abs().sum() > 0
     cfg = json.loads((run / "train_config.json").read_text())
-    assert (
-        cfg["trainable"] == ["processor.film", "processor.glob", "decoder.fabric_film"] and cfg["losses"]["fold"] == 0.3
-    )
+    assert cfg["trainable"] == ["processor.film", "processor.glob", "decoder.fabric_film"]
+    assert cfg["losses"]["fold"] == 0.3 and cfg["losses"]["relative"] == 0.03
     deepsd = ["--out", str(tmp_path / "d"), "--model", "deepsd", "--global-context"]
     capsys.readouterr()
     assert main([*args, *deepsd]) == 2
