@@ -21,6 +21,7 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 from torch_geometric.nn.resolver import aggregation_resolver
+from torch_geometric.utils import scatter
 
 from garsim.model.config import FABRIC_FEATURES, GarSimConfig
 from garsim.model.encoders import MLP, activation
@@ -158,12 +159,7 @@ def graph_pool(node: torch.Tensor, batch: torch.Tensor | None, num_graphs: int) 
     graph). Both are invariant to the node order and continuous in the rows."""
     if batch is None:
         return torch.cat([node.mean(0), node.amax(0)])[None]
-    d = node.shape[1]
-    counts = torch.bincount(batch, minlength=num_graphs).clamp(min=1).to(node.dtype)
-    mean = node.new_zeros(num_graphs, d).index_add_(0, batch, node) / counts[:, None]
-    idx = batch[:, None].expand(-1, d)
-    peak = node.new_full((num_graphs, d), float("-inf")).scatter_reduce(0, idx, node, "amax", include_self=True)
-    return torch.cat([mean, peak], dim=1)
+    return torch.cat([scatter(node, batch, 0, num_graphs, reduce=r) for r in ("mean", "max")], dim=1)
 
 
 class GlobalContext(nn.Module):

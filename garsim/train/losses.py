@@ -271,9 +271,7 @@ def garsim_loss(
     }
     l2 = terms["l2"]  # reported as it is (mean error), weighed in the total
     if w.relative > 0:
-        prior_err = scatter(
-            torch.linalg.vector_norm(data.prior - data.target, dim=-1), batch, dim=0, dim_size=num_graphs, reduce="mean"
-        )
+        prior_err = per_graph_error_mm(data.prior, data.target, data) / 1000.0
         l2 = l2 * (w.relative / prior_err.clamp_min(0.25 * w.relative))
     total = w.l2 * l2 + w.sm * terms["sm"] + w.nc * terms["nc"]
     if direction is not None and magnitude is not None and w.dir > 0:
