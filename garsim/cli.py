@@ -39,7 +39,7 @@ _THREAD_VARS = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")
 _USER_ERRORS = (ValueError, OSError, RuntimeError)
 """Exceptions reported as one line (MeshError and ExportError are ValueErrors; a missing, unreadable or
 unwritable file an OSError); anything else is a bug and keeps its traceback."""
-WIDENING_FLAGS = ("fabric_decoder_film", "global_context")
+WIDENING_FLAGS = ("fabric_decoder_film", "global_context", "target_surface")
 """GarSimConfig switches that `garsim train` can add to a model (new layers at zero, `GraphModel.widened`)."""
 
 
@@ -959,6 +959,13 @@ def build_parser() -> argparse.ArgumentParser:
         action="store_true",
         help="before each message-passing step, an MLP of the garment's pooled node latents added to every node "
         "(GarSimConfig.global_context); with --init, added to that model's weights at zero",
+    )
+    p.add_argument(
+        "--target-surface",
+        action="store_true",
+        help="per vertex, the prior's offset from the target body's nearby surface, its normal and signed distance, "
+        "encoded into the node latents (GarSimConfig.target_surface); with --init, added to that model's weights at "
+        "zero",
     )
     p.add_argument(
         "--num-steps",

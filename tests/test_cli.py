@@ -705,12 +705,14 @@ def test_fine_tune_with_new_layers_and_the_fold_term(tmp_path, capsys):
         str(base / "best"),
         "--fabric-decoder-film",
         "--global-context",
+        "--target-surface",
         "--num-steps",
         "6",
         "--trainable",
         "processor.film",
         "processor.glob",
         "decoder.fabric_film",
+        "surface_encoder",
     ]
     losses = ["--pair-weight", "5", "--fold-weight", "0.3", "--relative-l2", "0.03"]
     assert main([*args, "--out", str(run), *tune, *losses, "--lr", "1e-2"]) == 0
@@ -723,8 +725,9 @@ def test_fine_tune_with_new_layers_and_the_fold_term(tmp_path, capsys):
     assert any(not torch.equal(v, new[k]) for k, v in old.items() if k.startswith("processor.film"))
     assert new["decoder.fabric_film.weight"].abs().sum() > 0  # started at zero, trained
     assert new["processor.glob.0.mlp.2.weight"].abs().sum() > 0
+    assert after.config.target_surface and new["surface_encoder.mlp.2.weight"].abs().sum() > 0
     cfg = json.loads((run / "train_config.json").read_text())
-    assert cfg["trainable"] == ["processor.film", "processor.glob", "decoder.fabric_film"]
+    assert cfg["trainable"] == ["processor.film", "processor.glob", "decoder.fabric_film", "surface_encoder"]
     assert cfg["losses"]["fold"] == 0.3 and cfg["losses"]["relative"] == 0.03
     deepsd = ["--out", str(tmp_path / "d"), "--model", "deepsd", "--global-context"]
     capsys.readouterr()

@@ -287,3 +287,20 @@ def test_global_context_sees_the_whole_garment_but_not_the_other_graphs_of_a_bat
     both = wide.predict([a, b])
     np.testing.assert_allclose(both[0], wide.predict(a), atol=1e-6)
     np.testing.assert_allclose(both[1], wide.predict(b), atol=1e-6)
+
+
+def test_target_surface_starts_at_zero_and_learns():
+    """A model widened by ``target_surface`` predicts as before, and its encoder's zeroed last layer gets a
+    gradient."""
+    import dataclasses
+
+    torch.manual_seed(0)
+    cfg = GarSimConfig(latent=16, edge_latent=8, mlp_hidden=16, num_steps=1, head="displacement")
+    plain = GarSimModel(cfg).eval()
+    wide = plain.widened(dataclasses.replace(cfg, target_surface=True))
+    sample = make_sample(fabric="cotton")
+    np.testing.assert_array_equal(wide.predict(sample), plain.predict(sample))
+    wide.train()
+    graph = build_graph(sample, wide.config)
+    (wide(graph) - graph.target).square().sum().backward()
+    assert wide.surface_encoder.mlp[-1].weight.grad.abs().sum() > 0

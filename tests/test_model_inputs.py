@@ -1,5 +1,7 @@
 """Sample -> graph (Eq. 2): every input checked against brute-force values; batching offsets."""
 
+import dataclasses
+
 import numpy as np
 import pytest
 import torch
@@ -199,3 +201,41 @@ def test_pose_free_part_is_shared_and_read_only(sample):
     shift = np.full(3, 0.01) @ static.rot64.T  # the 1 cm world shift in the body frame
     np.testing.assert_allclose(full["delta"] - base["delta"], np.broadcast_to(shift, base["delta"].shape), atol=1e-5)
     np.testing.assert_allclose(full["p_prior"], base["p_prior"], atol=1e-5)
+
+
+def test_target_surface_on_a_plane_by_hand():
+    """A flat grid body (normal +Z): a point straight above a grid vertex has its offset and signed distance = its
+    height (negative below), the normal +Z; turning the frame turns the offset and the normal, not the distance."""
+    from garsim.model.inputs import target_surface
+
+    xs = np.linspace(-0.2, 0.2, 21)  # 2 cm grid, the soft anchor's blend is symmetric about a vertex
+    gx, gy = np.meshgrid(xs, xs, indexing="ij")
+    body = np.stack([gx.ravel(), gy.ravel(), np.zeros(gx.size)], axis=1)
+    idx = np.arange(gx.size).reshape(21, 21)
+    quads = np.stack([idx[:-1, :-1], idx[1:, :-1], idx[1:, 1:], idx[:-1, 1:]], axis=-1).reshape(-1, 4)
+    faces = np.concatenate([quads[:, [0, 1, 2]], quads[:, [0, 2, 3]]])
+    pts = np.array([[0.02, -0.04, 0.05], [0.0, 0.0, -0.03]])
+    f = target_surface(pts, body, faces, np.eye(3))
+    np.testing.assert_allclose(f[:, :3], [[0, 0, 0.05], [0, 0, -0.03]], atol=1e-6)
+    np.testing.assert_allclose(f[:, 3:6], [[0, 0, 1], [0, 0, 1]], atol=1e-6)
+    np.testing.assert_allclose(f[:, 6], [0.05, -0.03], atol=1e-6)
+    r = rot_z(0.7)
+    pts2 = np.array([[0.01, 0.0, 0.04]])  # between two grid vertices: the offset has a horizontal part
+    a, b = target_surface(pts2, body, faces, np.eye(3)), target_surface(pts2, body, faces, r)
+    assert abs(a[0, 0]) < 1e-6 and a[0, 2] == pytest.approx(0.04, abs=1e-6)  # symmetric blend: straight above
+    np.testing.assert_allclose(b[:, :3], a[:, :3] @ r.T, atol=1e-6)
+    np.testing.assert_allclose(b[:, 6], a[:, 6], atol=1e-7)
+
+
+def test_target_surface_input_follows_the_scene_and_is_continuous(sample):
+    """The target-surface input is invariant to a yaw and translation of the whole scene, and 1e-7 m of noise on
+    the prior moves it by about as much (no hard nearest-vertex choice)."""
+    cfg = GarSimConfig(target_surface=True)
+    g0 = build_graph(sample, cfg)
+    assert g0.surface.shape == (len(sample.garment), 7)
+    g1 = build_graph(transform_sample(sample, rot_z(-2.0), np.array([0.4, 0.3, -0.2])), cfg)
+    np.testing.assert_allclose(g1.surface.numpy(), g0.surface.numpy(), atol=5e-5)
+    rng = np.random.default_rng(0)
+    noisy = dataclasses.replace(sample, prior=sample.prior + rng.normal(0, 1e-7, sample.prior.shape).astype("f4"))
+    assert np.abs(build_graph(noisy, cfg).surface.numpy() - g0.surface.numpy()).max() < 1e-4
+    assert not hasattr(build_graph(sample), "surface")  # off by default: the paper's inputs only

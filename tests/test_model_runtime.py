@@ -28,6 +28,7 @@ CONFIGS = {
     "position, gelu, two layers": dict(head="position", activation="gelu", mlp_layers=2),
     "shared weights, no film, no residual": dict(share_weights=True, fabric_film=False, residual=False),
     "displacement, global context": dict(head="displacement", global_context=True),
+    "target surface": dict(target_surface=True),
     "no message passing, no norm": dict(num_steps=0, layer_norm=False),
 }
 

@@ -70,6 +70,19 @@ def vertex_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
     return (vn / np.maximum(np.linalg.norm(vn, axis=1, keepdims=True), 1e-20)).astype(v.dtype)
 
 
+def vertex_normals_at(vertices: np.ndarray, faces: np.ndarray, sel: np.ndarray) -> np.ndarray:
+    """``vertex_normals(vertices, faces)[sel]`` from only the faces touching ``sel`` (same values)."""
+    touched = np.zeros(len(vertices), dtype=bool)
+    touched[sel] = True
+    sub = faces[touched[faces].any(axis=1)]  # every face incident to a selected vertex, in order
+    fn = face_normals(vertices, sub, normalize=False)
+    idx = sub.T.ravel()  # the summation order of vertex_normals (corner 0 of all faces, then 1, 2)
+    vn = np.stack([np.bincount(idx, weights=np.tile(fn[:, c], 3), minlength=len(vertices)) for c in range(3)], axis=1)[
+        sel
+    ]
+    return (vn / np.maximum(np.linalg.norm(vn, axis=1, keepdims=True), 1e-20)).astype(vertices.dtype)
+
+
 _NORMALS = ContentCache(8)
 
 

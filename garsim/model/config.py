@@ -21,6 +21,9 @@ def check_known_keys(cls: type, d: dict[str, Any]) -> None:
 
 FABRIC_FEATURES = 3
 """Fabric input per vertex: log bending rigidity, areal density, stretch (silk = 0, leather = 1)."""
+SURFACE_FEATURES = 7
+"""Target-surface input per vertex (``target_surface``): offset (3) from the prior's soft anchor on the target body,
+that body's blended unit normal there (3), the signed distance along it (1); lengths in metres, in the body frame."""
 
 
 @dataclass
@@ -72,6 +75,12 @@ class GarSimConfig:
     # vertex knows the garment within L edges; a top's hem cannot see the shoulders that lift it). Before each step
     # every node gets an MLP of its graph's mean- and max-pooled latents (zero-initialised: off at the start)
     global_context: bool = False
+    # target surface (a deviation: the paper's body inputs are taken at q_i on the canonical body and its motion δ,
+    # so a vertex cannot see another body part that the target pose brings near it, e.g. an arm lowered against a
+    # top's side). Per vertex, the prior's soft anchor on the *target* body: the offset from that surface point, the
+    # surface's blended normal and the signed distance along it, encoded by an MLP added to the node latents
+    # (zero-initialised: off at the start)
+    target_surface: bool = False
 
     def __post_init__(self) -> None:
         self.semantic_grid = tuple(int(v) for v in self.semantic_grid)  # type: ignore[assignment]
@@ -105,6 +114,11 @@ class GarSimConfig:
             return int(self.num_body_vertices)  # type: ignore[arg-type]
         gx, gy, gz = self.semantic_grid
         return gx * gy * gz
+
+    @property
+    def surface_scale(self) -> tuple[float, ...]:
+        """Per target-surface feature, its factor into network units (lengths by ``pos_scale``, the normal as is)."""
+        return (self.pos_scale,) * 3 + (1.0,) * 3 + (self.pos_scale,)
 
     def to_dict(self) -> dict[str, Any]:
         """Plain-JSON dict (tuples become lists)."""

@@ -6,7 +6,7 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
-from garsim.model.config import GarSimConfig
+from garsim.model.config import SURFACE_FEATURES, GarSimConfig
 
 _ACTIVATIONS = {"relu": nn.ReLU, "silu": nn.SiLU, "gelu": nn.GELU}
 
@@ -120,3 +120,18 @@ class EdgeEncoder(nn.Module):
 
     def forward(self, edge_attr: torch.Tensor) -> torch.Tensor:
         return self.mlp(edge_attr * self.scale)
+
+
+class TargetSurfaceEncoder(nn.Module):
+    """``GarSimConfig.target_surface``: (offset, normal, signed distance) on the target body -> a term added to η.
+    Its last layer starts at zero, so a model widened by it (``GraphModel.widened``) starts as it was."""
+
+    def __init__(self, cfg: GarSimConfig):
+        super().__init__()
+        self.register_buffer("scale", torch.tensor(cfg.surface_scale), persistent=False)
+        self.mlp = MLP(SURFACE_FEATURES, cfg.mlp_hidden, cfg.latent, cfg.mlp_layers, cfg.activation, norm=False)
+        nn.init.zeros_(self.mlp[-1].weight)
+        nn.init.zeros_(self.mlp[-1].bias)
+
+    def forward(self, surface: torch.Tensor) -> torch.Tensor:
+        return self.mlp(surface * self.scale)

@@ -25,6 +25,7 @@ from garsim.model.encoders import (
     GarmentAwareEncoder,
     GeometryEncoder,
     NodeEncoder,
+    TargetSurfaceEncoder,
 )
 from garsim.model.graph import build_graph, collate
 from garsim.model.processor import Processor
@@ -135,6 +136,7 @@ class GarSimModel(GraphModel):
         self.body_encoder = BodyAwareEncoder(cfg)
         self.node_encoder = NodeEncoder(cfg)
         self.edge_encoder = EdgeEncoder(cfg)
+        self.surface_encoder = TargetSurfaceEncoder(cfg) if cfg.target_surface else None
         self.processor = Processor(cfg)
         self.decoder = Decoder(cfg)
 
@@ -173,6 +175,8 @@ class GarSimModel(GraphModel):
         chi = self.garment_encoder(x_gar, data.fabric, data.p, data.p_prior)
         mu = self.body_encoder(x_body, data.delta, s)
         eta = self.node_encoder(chi, mu)
+        if self.surface_encoder is not None:
+            eta = eta + self.surface_encoder(data.surface)
         pi = self.edge_encoder(data.edge_attr)
         eta, _ = self.processor(eta, pi, data.edge_index, data.fabric, None if single else batch, data.rot.shape[0])
         vec, direction, magnitude = self.decoder(eta, data.fabric)

@@ -11,7 +11,7 @@ from scipy.spatial import cKDTree
 from torch_geometric.data import Batch, Data
 
 from garsim.data.sample import Sample
-from garsim.geometry.mesh import face_normals
+from garsim.geometry.mesh import vertex_normals_at
 from garsim.model.config import GarSimConfig
 from garsim.model.inputs import graph_arrays
 
@@ -61,26 +61,13 @@ def build_graph(
     return data
 
 
-def _vertex_normals_at(vertices: np.ndarray, faces: np.ndarray, sel: np.ndarray) -> np.ndarray:
-    """``vertex_normals(vertices, faces)[sel]`` from only the faces touching ``sel`` (same values)."""
-    touched = np.zeros(len(vertices), dtype=bool)
-    touched[sel] = True
-    sub = faces[touched[faces].any(axis=1)]  # every face incident to a selected vertex, in order
-    fn = face_normals(vertices, sub, normalize=False)
-    idx = sub.T.ravel()  # the summation order of vertex_normals (corner 0 of all faces, then 1, 2)
-    vn = np.stack([np.bincount(idx, weights=np.tile(fn[:, c], 3), minlength=len(vertices)) for c in range(3)], axis=1)[
-        sel
-    ]
-    return (vn / np.maximum(np.linalg.norm(vn, axis=1, keepdims=True), 1e-20)).astype(vertices.dtype)
-
-
 def collision_body(sample: Sample, k: int = 16) -> dict[str, torch.Tensor]:
     """Target-body vertices near the garment (k nearest of each prior/target vertex) and their unit normals."""
     body_t = np.asarray(sample.body_target, dtype=np.float32)
     pts = sample.prior if sample.target is None else np.concatenate([sample.prior, sample.target])
     _, idx = cKDTree(body_t).query(pts, k=min(k, len(body_t)), workers=-1)
     sel = np.unique(np.asarray(idx).ravel())
-    normals = _vertex_normals_at(body_t, np.asarray(sample.body_faces, dtype=np.int64), sel)
+    normals = vertex_normals_at(body_t, np.asarray(sample.body_faces, dtype=np.int64), sel)
     return {
         "col_body": torch.from_numpy(body_t[sel].copy()),
         "col_normal": torch.from_numpy(np.ascontiguousarray(normals, dtype=np.float32)),

@@ -33,9 +33,9 @@ from garsim.garments.fabrics import PRESETS as FABRIC_PRESETS
 from garsim.garments.fabrics import Fabric, fabric_from_values, get_fabric
 from garsim.geometry.cache import ContentCache, content_key
 from garsim.geometry.io import as_mesh
-from garsim.geometry.mesh import directed_edges, face_pairs, vertex_rings
+from garsim.geometry.mesh import directed_edges, face_pairs, vertex_normals_at, vertex_rings
 from garsim.geometry.proximity import cached_tree, soft_anchor
-from garsim.model.config import FABRIC_FEATURES, GarSimConfig
+from garsim.model.config import FABRIC_FEATURES, SURFACE_FEATURES, GarSimConfig
 
 _BODIES = ContentCache(8)  # per canonical body: its BodyFrame
 _GARMENTS = ContentCache(8, scope="garment")  # per template garment: mesh rings and receiver-sorted edges
@@ -216,6 +216,8 @@ class StaticGraph:
         self.anchor_w = sp.csr_matrix((w.data, (w.row, slot)), shape=(n, len(used)))
         self.used = used
         self.rot64 = body.rot64
+        self.body_faces = body.faces
+        self.target_surface = cfg.target_surface
         # every vector in the body frame, in float64 (then float32): rotate the points, then subtract
         gf = g.astype(np.float64) @ self.rot64.T
         self.bq = self.anchor_w @ body.framed64[used]
@@ -248,13 +250,34 @@ class StaticGraph:
         bq_t = self.anchor_w @ body_target[self.used].astype(np.float64)
         bq_tf = bq_t @ self.rot64.T
         snd, rcv = self.arrays["edge_index"]
-        return {
+        arrays = {
             "prior": prior,
             "anchor": bq_t.astype(np.float32),
             "p_prior": (pf - bq_tf).astype(np.float32),
             "delta": (bq_tf - self.bq).astype(np.float32),
             "edge_attr": np.concatenate([self.edge_garment, (pf[rcv] - pf[snd]).astype(np.float32)], axis=1),
         }
+        if self.target_surface:
+            arrays["surface"] = target_surface(prior, body_target, self.body_faces, self.rot64)
+        return arrays
+
+
+def target_surface(points: np.ndarray, body: np.ndarray, faces: np.ndarray, rot: np.ndarray) -> np.ndarray:
+    """(N, SURFACE_FEATURES) float32: per point, the offset from its soft anchor on ``body`` (``soft_anchor``: a
+    continuous blend of the body vertices near the closest one), the blend of their unit normals (renormalised) and
+    the signed distance along it (negative inside), vectors turned by ``rot`` (world -> body frame)."""
+    p = np.asarray(points, dtype=np.float64)
+    w = soft_anchor(p, body).tocsc()
+    sel = np.flatnonzero(np.diff(w.indptr))  # the body vertices in some blend
+    w = w[:, sel]
+    normals = vertex_normals_at(np.asarray(body, dtype=np.float64), np.asarray(faces, dtype=np.int64), sel)
+    n = w @ normals
+    n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-12)
+    offset = p - w @ np.asarray(body, dtype=np.float64)[sel]
+    dist = np.einsum("ij,ij->i", offset, n)[:, None]
+    out = np.concatenate([offset @ rot.T, n @ rot.T, dist], axis=1)
+    assert out.shape[1] == SURFACE_FEATURES
+    return out.astype(np.float32)
 
 
 _STATIC = ContentCache(8, scope="garment")  # per (garment, canonical body, input configuration): its StaticGraph
@@ -270,6 +293,7 @@ def static_graph(sample: Sample, config: GarSimConfig | None = None, name: str |
         cfg.semantic,
         cfg.semantic_grid,
         cfg.num_body_vertices,
+        cfg.target_surface,
     )
     key = content_key(sample.garment, sample.garment_faces, sample.body_canonical, sample.body_faces) + inputs
 

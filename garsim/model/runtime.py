@@ -159,6 +159,8 @@ class GarSimRuntime:
         self.body = _MLP(s, "body_encoder.mlp.", act)
         self.node = _MLP(s, "node_encoder.mlp.", act)
         self.edge = _MLP(s, "edge_encoder.mlp.", act)
+        self.surface = _MLP(s, "surface_encoder.mlp.", act) if config.target_surface else None
+        self.surface_scale = np.array(config.surface_scale, dtype=np.float32)
         n_blocks = 1 if (config.share_weights and config.num_steps > 0) else config.num_steps
         self.steps = [
             (
@@ -209,6 +211,8 @@ class GarSimRuntime:
         chi = self.garment(np.concatenate([x_gar, fabric, a["p"] * sc, a["p_prior"] * sc], axis=1))
         mu = self.body(np.concatenate([x_body, a["delta"] * sc, s], axis=1))
         node = self.node(np.concatenate([chi, mu], axis=1))
+        if self.surface is not None:
+            node += self.surface(a["surface"] * self.surface_scale)
         edge = self.edge(a["edge_attr"] * sc)
         node = self._process(node, edge, a["edge_index"], mean, fabric)
         vec = self._decode(node, fabric)
