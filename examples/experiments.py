@@ -10,6 +10,7 @@ trained under one protocol (data, split, schedule, seed) and scored per garment 
     .venv/bin/python examples/experiments.py corrections $ARGS --model DIR
     .venv/bin/python examples/experiments.py capacity $ARGS --budget 100 --config garsim/weights/config.json
     .venv/bin/python examples/experiments.py oracle $ARGS --model garsim/weights   (trains nothing)
+    .venv/bin/python examples/experiments.py anatomy $ARGS --model garsim/weights  (trains nothing)
 
 Each writes <out>/<study>.json and <out>/<study>.md (its tables, headed by the command). Trained models go to
 <out>/models/<key>/, keyed by what decides them, so a variant several studies share (the base model trained on
@@ -45,6 +46,7 @@ TITLES = {
     "corrections": "Corrections over the prior (Fig. 8)",
     "capacity": "Capacity: wider and deeper networks on the families v0.7 underfits",
     "oracle": "Smooth-correction oracle: how much of each family's error is finer than a length",
+    "anatomy": "Error anatomy: along and across the body, by height, and the correction's direction",
 }
 
 
@@ -115,6 +117,11 @@ def parser() -> argparse.ArgumentParser:
     s = sub.add_parser("oracle", parents=[common], help=TITLES["oracle"])
     s.add_argument("--model", help="a trained model folder scored beside the oracle (default: none)")
     s.add_argument("--sigmas", nargs="+", type=float, default=list(studies.SIGMAS), help="lengths in metres")
+    s = sub.add_parser("anatomy", parents=[common], help=TITLES["anatomy"])
+    s.add_argument("--model", required=True, help="a trained model folder (its raw network is scored)")
+    s.add_argument(
+        "--external-data", default=str(EXTERNAL.parent / "data"), help="the external set's data (skipped when absent)"
+    )
     return p
 
 
@@ -154,6 +161,21 @@ def run(args: argparse.Namespace) -> tuple[dict[str, Any], list[str]]:
         return result, [
             "Mean Euclidean error (mm) and its ratio to the prior's:\n\n" + studies.oracle_table(result["oracle"])
         ]
+    elif args.study == "anatomy":
+        result = {
+            "protocol": study.to_dict(),
+            "split": studies.error_anatomy(studies.dataset_anatomy(study, load_model(args.model))),
+        }
+        sections = [
+            f"The {args.split} split, raw network (prior -> model, mm):\n\n" + studies.anatomy_table(result["split"])
+        ]
+        if Path(args.external_data).exists():
+            result["external"] = studies.error_anatomy(studies.external_anatomy(args.external_data, args.model))
+            sections.append(
+                "The external set, raw network through the API (prior -> model, mm):\n\n"
+                + studies.anatomy_table(result["external"])
+            )
+        return result, sections
     elif args.study == "scaling":
         external = args.external if Path(args.external).exists() else None
         if external is None:

@@ -77,3 +77,13 @@ def obj_lists(path) -> tuple[np.ndarray, np.ndarray, list[str]]:
         elif parts and parts[0] == "f":
             f.append(parts[1:])
     return np.array(v), np.array(vt), f
+
+
+def plane_grid(half: float = 0.2, n: int = 21) -> tuple[np.ndarray, np.ndarray]:
+    """A flat square grid in z = 0 (normal +Z), n x n vertices from -half to half: a body surface known by hand."""
+    xs = np.linspace(-half, half, n)
+    gx, gy = np.meshgrid(xs, xs, indexing="ij")
+    v = np.stack([gx.ravel(), gy.ravel(), np.zeros(gx.size)], axis=1)
+    idx = np.arange(gx.size).reshape(n, n)
+    quads = np.stack([idx[:-1, :-1], idx[1:, :-1], idx[1:, 1:], idx[:-1, 1:]], axis=-1).reshape(-1, 4)
+    return v, np.concatenate([quads[:, [0, 1, 2]], quads[:, [0, 2, 3]]])

@@ -7,13 +7,17 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from mesh_fixtures import plane_grid
 
 from garsim.data.store import DatasetStore
 from garsim.eval.studies import (
     StudyConfig,
+    anatomy_row,
     capacity,
     data_scaling,
     deepsd_comparison,
+    error_anatomy,
+    external_anatomy,
     family_table,
     generalisation,
     heads_and_steps,
@@ -26,6 +30,7 @@ from garsim.model.config import GarSimConfig
 from garsim.train.trainer import TrainConfig
 
 FIXTURE = Path(__file__).parent / "fixtures" / "dataset_v2"
+WEIGHTS = Path(__file__).parents[1] / "garsim" / "weights"
 SMALL = GarSimConfig(latent=32, edge_latent=16, mlp_hidden=32, num_steps=2)
 BASELINES = {"prior", "nearest", "ground truth"}
 TEST_FAMILIES = {"all", "skirt", "top", "tshirt", "longsleeve", "trousers", "dress"}
@@ -264,3 +269,53 @@ def test_driver_oracle(driver, driver_args):
     assert driver.main(["oracle", *args, "--sigmas", "0.02", "0.08"]) == 0
     text = (folder / "oracle.md").read_text()
     assert "| all |" in text and "oracle@0.08" in text and "(0." in text
+
+
+def test_anatomy_row_by_hand():
+    """Over a flat body (normal +Z): a prior off by 1-4 mm across the normal, by height band, and a prediction 2 mm
+    above the truth; the correction points the right way (cosine > 0), none at all scores 0."""
+    body, faces = plane_grid()
+    target = np.stack([np.linspace(-0.1, 0.1, 8), np.zeros(8), np.full(8, 0.05)], axis=1)
+    template = target + np.array([0.0, 0.0, 1.0]) * np.arange(8)[::-1, None]  # heights descending: bands 3,3,2,..0
+    band = np.array([3, 3, 2, 2, 1, 1, 0, 0])
+    prior = target + np.array([0.0, 0.001, 0.0]) * (band + 1)[:, None]
+    pred = target + np.array([0.0, 0.0, 0.002])
+    row = anatomy_row(template, prior, pred, target, body, faces)
+    assert row["prior_mm"] == pytest.approx(2.5) and row["prior_tangential_mm"] == pytest.approx(2.5)
+    assert row["prior_normal_mm"] == pytest.approx(0.0, abs=1e-9)
+    assert row["model_normal_mm"] == pytest.approx(2.0) and row["model_tangential_mm"] == pytest.approx(0.0, abs=1e-9)
+    assert [row[f"prior_band{b}_mm"] for b in range(4)] == pytest.approx([1.0, 2.0, 3.0, 4.0])
+    assert 0.0 < row["cosine"] < 1.0
+    assert anatomy_row(template, prior, target, target, body, faces)["cosine"] == pytest.approx(1.0)
+    assert anatomy_row(template, prior, prior, target, body, faces)["cosine"] == 0.0
+    summary = error_anatomy([("top", row), ("skirt", {**row, "cosine": 0.0})])
+    assert list(summary) == ["all", "skirt", "top"] and summary["all"]["samples"] == 2
+    assert summary["all"]["cosine"] == pytest.approx(row["cosine"] / 2)
+
+
+def test_external_anatomy_drapes_through_the_api(tmp_path):
+    """A folder in the external set's format (one fixture sample): the raw network through ``GarSim.drape``."""
+    s = DatasetStore(FIXTURE).samples("test")[0]
+    np.save(tmp_path / "body_faces.npy", s.body_faces)
+    np.savez(
+        tmp_path / "h000.npz",
+        body_canonical=s.body_canonical,
+        body_target=s.body_target,
+        garment_template=s.garment,
+        garment_faces=s.garment_faces,
+        garment_prior=s.prior,
+        garment_target_gt=s.target,
+        garment_type=s.garment_type,
+        fabric=s.fabric,
+    )
+    [(family, row)] = external_anatomy(tmp_path, WEIGHTS)
+    assert family == s.garment_type
+    assert row["prior_mm"] == pytest.approx(1000 * np.linalg.norm(s.prior - s.target, axis=1).mean())
+    assert row["model_mm"] != row["prior_mm"] and -1.0 <= row["cosine"] <= 1.0
+
+
+def test_driver_anatomy(driver, driver_args):
+    folder, args = driver_args
+    assert driver.main(["anatomy", *args, "--model", str(WEIGHTS), "--external-data", str(folder / "none")]) == 0
+    text = (folder / "anatomy.md").read_text()
+    assert "| all |" in text and "tangential" in text and "The external set" not in text

@@ -5,6 +5,7 @@ import dataclasses
 import numpy as np
 import pytest
 import torch
+from mesh_fixtures import plane_grid
 from model_fixtures import make_sample, rot_z, transform_sample
 
 from garsim.geometry.mesh import face_pairs
@@ -208,12 +209,7 @@ def test_target_surface_on_a_plane_by_hand():
     height (negative below), the normal +Z; turning the frame turns the offset and the normal, not the distance."""
     from garsim.model.inputs import target_surface
 
-    xs = np.linspace(-0.2, 0.2, 21)  # 2 cm grid, the soft anchor's blend is symmetric about a vertex
-    gx, gy = np.meshgrid(xs, xs, indexing="ij")
-    body = np.stack([gx.ravel(), gy.ravel(), np.zeros(gx.size)], axis=1)
-    idx = np.arange(gx.size).reshape(21, 21)
-    quads = np.stack([idx[:-1, :-1], idx[1:, :-1], idx[1:, 1:], idx[:-1, 1:]], axis=-1).reshape(-1, 4)
-    faces = np.concatenate([quads[:, [0, 1, 2]], quads[:, [0, 2, 3]]])
+    body, faces = plane_grid()  # 2 cm grid, the soft anchor's blend is symmetric about a vertex
     pts = np.array([[0.02, -0.04, 0.05], [0.0, 0.0, -0.03]])
     f = target_surface(pts, body, faces, np.eye(3))
     np.testing.assert_allclose(f[:, :3], [[0, 0, 0.05], [0, 0, -0.03]], atol=1e-6)

@@ -26,7 +26,8 @@ from garsim.data.sample import Sample
 from garsim.data.store import DatasetStore, GarmentLevel, SequenceRecord
 from garsim.eval.experiments import evaluate_split, score_predictions
 from garsim.garments.remesh import subdivide, transfer_barycentric
-from garsim.geometry.mesh import surface_smoother
+from garsim.geometry.mesh import cached_vertex_normals, surface_smoother
+from garsim.geometry.proximity import soft_anchor
 from garsim.geometry.render import DEFAULT_COLORS, render_views
 from garsim.model.baselines import load_model
 from garsim.model.config import HEADS, GarSimConfig
@@ -371,6 +372,106 @@ def smooth_oracle(study: StudyConfig, model: Any = None, sigmas: Sequence[float]
         for family, rows in sorted(per.items(), key=lambda kv: (kv[0] != "all", kv[0]))
     }
     return {"protocol": study.to_dict(), "sigmas": list(sigmas), "oracle": results}
+
+
+ANATOMY_BANDS = 4
+"""Height bands (quantiles of the template's vertex heights) of ``error_anatomy``'s error profile."""
+
+
+def anatomy_row(
+    template: np.ndarray,
+    prior: np.ndarray,
+    pred: np.ndarray,
+    target: np.ndarray,
+    body_target: np.ndarray,
+    body_faces: np.ndarray,
+) -> dict[str, float]:
+    """Where one drape's error lies (mm): for the prior and the prediction, the mean error's part along the target
+    body's normal (at the simulated vertex's soft anchor) and across it, and the mean error in each of
+    ``ANATOMY_BANDS`` height bands of the template, lowest first; ``cosine``: the prediction's correction over the
+    prior against the simulator's (1: the right direction, 0: unrelated)."""
+    body = np.asarray(body_target, dtype=np.float64)
+    truth = np.asarray(target, dtype=np.float64)
+    w = soft_anchor(truth, body)
+    n = w @ cached_vertex_normals(body, np.asarray(body_faces, dtype=np.int64)).astype(np.float64)
+    n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-12)
+    z = np.asarray(template, dtype=np.float64)[:, 2]
+    band = np.minimum((np.argsort(np.argsort(z, kind="stable")) * ANATOMY_BANDS) // len(z), ANATOMY_BANDS - 1)
+    row: dict[str, float] = {}
+    for name, x in (("prior", prior), ("model", pred)):
+        e = np.asarray(x, dtype=np.float64) - truth
+        along = np.einsum("ij,ij->i", e, n)
+        norm = np.linalg.norm(e, axis=1)
+        row[f"{name}_mm"] = 1000.0 * float(norm.mean())
+        row[f"{name}_normal_mm"] = 1000.0 * float(np.abs(along).mean())
+        row[f"{name}_tangential_mm"] = 1000.0 * float(np.linalg.norm(e - along[:, None] * n, axis=1).mean())
+        for b in range(ANATOMY_BANDS):
+            row[f"{name}_band{b}_mm"] = 1000.0 * float(norm[band == b].mean())
+    need, got = truth - prior, np.asarray(pred, dtype=np.float64) - prior
+    row["cosine"] = float((need * got).sum() / max(np.sqrt((need**2).sum() * (got**2).sum()), 1e-30))
+    return row
+
+
+def error_anatomy(rows: Sequence[tuple[str, dict[str, float]]]) -> dict[str, dict[str, float]]:
+    """``anatomy_row`` results (family, row) averaged per family and over all, with the sample count."""
+    per: dict[str, list[dict[str, float]]] = defaultdict(list)
+    for family, row in rows:
+        per[family].append(row)
+        per["all"].append(row)
+    return {
+        family: {"samples": len(rs), **{k: float(np.mean([r[k] for r in rs])) for k in rs[0]}}
+        for family, rs in sorted(per.items(), key=lambda kv: (kv[0] != "all", kv[0]))
+    }
+
+
+def anatomy_table(anatomy: dict[str, dict[str, float]]) -> str:
+    """A Markdown table of ``error_anatomy``: per family, prior -> model for the error, its normal and tangential
+    parts and each height band, and the correction's cosine."""
+    parts = ["", "_normal", "_tangential", *(f"_band{b}" for b in range(ANATOMY_BANDS))]
+    names = ["error", "normal", "tangential", *(f"band {b + 1}" for b in range(ANATOMY_BANDS))]
+    lines = [
+        "| family | samples | " + " | ".join(names) + " | cosine |",
+        "|---|---|" + "---|" * (len(names) + 1),
+    ]
+    for family, r in anatomy.items():
+        cells = [f"{r[f'prior{p}_mm']:.1f} -> {r[f'model{p}_mm']:.1f}" for p in parts]
+        lines.append(f"| {family} | {r['samples']} | " + " | ".join(cells) + f" | {r['cosine']:.2f} |")
+    return "\n".join(lines)
+
+
+def dataset_anatomy(study: StudyConfig, model: Any) -> list[tuple[str, dict[str, float]]]:
+    """``anatomy_row`` of every sample of the study's scored split, the model's raw network against the prior."""
+    samples = DatasetStore(study.scored_data).samples(study.split, study.resolution)
+    if not samples:
+        raise ValueError(f"{study.scored_data}: no {study.split!r} samples")
+    preds = model.predict(samples)
+    return [
+        (s.garment_type, anatomy_row(s.garment, s.prior, p, s.target, s.body_target, s.body_faces))
+        for s, p in zip(samples, preds)
+    ]
+
+
+def external_anatomy(data_dir: str | Path, model_dir: str | Path) -> list[tuple[str, dict[str, float]]]:
+    """``anatomy_row`` of every drape of the external check set (``../shared/external-eval/data``), predicted as its
+    checker does (``GarSim.load(...).drape``) but with the raw network (no push-out), against the set's own prior."""
+    d = Path(data_dir)
+    body_faces = np.load(d / "body_faces.npy")
+    sim = GarSim.load(model_dir, collision_margin=None)
+    rows = []
+    for path in sorted(d.glob("[hr]*.npz")):
+        x = np.load(path)
+        pred = sim.drape(
+            (x["body_canonical"], body_faces),
+            (x["body_target"], body_faces),
+            (x["garment_template"], x["garment_faces"]),
+            fabric=str(x["fabric"]),
+        )
+        family = str(x["garment_type"]) + ("@hires" if path.name.startswith("r") else "")
+        row = anatomy_row(
+            x["garment_template"], x["garment_prior"], pred, x["garment_target_gt"], x["body_target"], body_faces
+        )
+        rows.append((family, row))
+    return rows
 
 
 def oracle_table(oracle: dict[str, dict[str, float]]) -> str:
