@@ -75,6 +75,7 @@ def test_anchor_weights_are_continuous_where_the_nearest_vertex_jumps():
     assert (np.diff(w[:, 0]) < 0).all() and np.abs(np.diff(w[:, 0])).max() < 0.02  # no jump at the medial plane
     far = soft_anchor(np.array([[0.5, 0, 0]]), body).toarray()[0]
     assert far.tolist() == [0.0, 1.0, 0.0]  # a clear nearest vertex alone carries the weight
+    assert soft_anchor(np.zeros((0, 3)), body).shape == (0, 3)  # no points (e.g. a garment without pins)
 
 
 def test_yaw_frame_commutes_with_rotation(sample):

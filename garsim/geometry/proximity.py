@@ -59,6 +59,8 @@ def soft_anchor(points: np.ndarray, vertices: np.ndarray, width: float = SOFT_AN
 
 def _soft_anchor(pts: np.ndarray, verts: np.ndarray, width: float) -> sp.csr_matrix:
     n, nv = len(pts), len(verts)
+    if n == 0:
+        return sp.csr_matrix((0, nv))
     tree = cached_tree(verts)
     k = min(_K0, nv)
     rows, cols, vals = [], [], []
