@@ -72,12 +72,7 @@ def fabric_fields(fabric: Any) -> tuple[str, dict[str, float] | None]:
             raise ValueError(f"unknown fabric {fabric!r}; choose one of {', '.join(FABRICS)} or give physical values")
         return fabric.strip().lower(), None
     if isinstance(fabric, dict):
-        try:
-            fabric = fabric_from_values(dict(fabric))
-        except TypeError as exc:
-            raise ValueError(
-                f"fabric values must be bending, density, stretch (and optional friction, damping, thickness): {exc}"
-            ) from None
+        fabric = fabric_from_values(dict(fabric))
     if isinstance(fabric, Fabric):
         return (
             (fabric.name, None)

@@ -102,3 +102,12 @@ def test_presets_are_frozen_and_validated():
         Fabric("bad", bending=float("nan"), density=0.1, stretch=1e3)
     with pytest.raises(ValueError, match="bending must be > 0"):
         Fabric("bad", bending=0.0, density=0.1, stretch=1e3)
+
+
+def test_fabric_values_name_the_missing_and_unknown_keys():
+    with pytest.raises(ValueError, match=r"missing stretch; give bending"):
+        fabric_from_values({"bending": 1e-5, "density": 0.2})
+    with pytest.raises(ValueError, match=r"missing bending, stretch; unknown colour"):
+        fabric_from_values({"density": 0.2, "colour": 1.0})
+    f = fabric_from_values({"bending": 1e-5, "density": 0.2, "stretch": 3000.0, "friction": 0.3})
+    assert f.friction == 0.3 and f.thickness == Fabric.thickness  # optional keys default

@@ -105,7 +105,17 @@ def get_fabric(fabric: str | Fabric) -> Fabric:
 
 
 def fabric_from_values(values: dict[str, float], name: str = "custom") -> Fabric:
-    """A ``Fabric`` from stored physical values (``Fabric.values()``); missing optional keys take defaults."""
+    """A ``Fabric`` from stored physical values (``Fabric.values()``); missing optional keys take defaults.
+    Raises ValueError naming the missing or unknown keys."""
+    known = [f.name for f in fields(Fabric) if f.name != "name"]
+    missing = [k for k in _LOG_KEYS if k not in values]
+    unknown = sorted(set(values) - set(known))
+    if missing or unknown:
+        raise ValueError(
+            f"fabric values: {'missing ' + ', '.join(missing) if missing else ''}"
+            f"{'; ' if missing and unknown else ''}{'unknown ' + ', '.join(unknown) if unknown else ''}; "
+            f"give bending (N·m), density (kg/m²), stretch (N/m), optionally {', '.join(known[3:])}"
+        )
     return Fabric(name=name, **values)
 
 
