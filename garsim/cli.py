@@ -23,6 +23,32 @@ from garsim.atomic import atomic_write_bytes
 
 FABRIC_CHOICES: tuple[str, ...] = ("silk", "cotton", "denim", "leather")
 """The fabric presets (``garsim.data.sample.FABRICS``, repeated here so that parsing imports no numpy)."""
+
+
+def fabric_arg(text: str) -> str | dict[str, float]:
+    """``--fabric``: a preset name, or physical values as ``bending=2e-5,density=0.2,stretch=3000`` (N·m, kg/m², N/m;
+    optionally friction, bending_damping, stretch_damping, thickness), checked by the API."""
+    if "=" not in text:
+        name = text.strip().lower()
+        if name not in FABRIC_CHOICES:
+            raise argparse.ArgumentTypeError(
+                f"unknown fabric {text!r}: a preset ({', '.join(FABRIC_CHOICES)}) or key=value physical values"
+            )
+        return name
+    values: dict[str, float] = {}
+    for item in text.split(","):
+        key, _, value = item.partition("=")
+        try:
+            values[key.strip()] = float(value)
+        except ValueError:  # no "=" leaves an empty value
+            raise argparse.ArgumentTypeError(f"fabric value {item.strip()!r} is not key=number") from None
+    return values
+
+
+FABRIC_HELP = (
+    f"a preset ({', '.join(FABRIC_CHOICES)}) or physical values, e.g. bending=2e-5,density=0.2,stretch=3000 "
+    "(N·m, kg/m², N/m; optionally friction, bending_damping, stretch_damping, thickness)"
+)
 FAMILY_CHOICES: tuple[str, ...] = ("skirt", "top", "tshirt", "longsleeve", "trousers", "dress")
 """The garment families (``garsim.data.sample.GARMENT_TYPES``, repeated for the same reason)."""
 MODEL_CHOICES: tuple[str, ...] = ("garsim", "deepsd")
@@ -761,7 +787,7 @@ def build_parser() -> argparse.ArgumentParser:
         required=True,
         help="garment mesh draped on the canonical body; its UVs and normals (OBJ vt/vn, seams kept) go to the output",
     )
-    p.add_argument("--fabric", default="cotton", choices=FABRIC_CHOICES, help="fabric preset")
+    p.add_argument("--fabric", default="cotton", type=fabric_arg, help=FABRIC_HELP)
     p.add_argument(
         "--pinned",
         metavar="FILE|auto",
@@ -800,7 +826,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--interpolate", type=int, metavar="N", help="resample the --poses keyframes to N frames (slerp)")
     p.add_argument("--canonical", help="canonical body mesh (with --targets)")
     p.add_argument("--targets", help="folder of target body OBJs (sorted by name) or an .npz with 'vertices' (T, V, 3)")
-    p.add_argument("--fabric", default="cotton", choices=FABRIC_CHOICES, help="fabric preset")
+    p.add_argument("--fabric", default="cotton", type=fabric_arg, help=FABRIC_HELP)
     p.add_argument(
         "--pinned",
         metavar="FILE|auto",
