@@ -1,12 +1,13 @@
 """How strapped garments hang: the parametric tops and dresses are held by their bodice's top ring
 (``garments/templates/builders.py: _band_pins``), so their straps carry no load and slide on the shoulders. This runs
-the first template tops and dresses of a generation plan (training split, unpaired, under 900 vertices) twice through
-the generator's own ``simulate_job``: with the band pins, and with no pins at all (the garment hangs on its straps by
-contact and friction). Per run: accepted or the rejection, and per settled target the mean error of the skinning prior
-against the simulation (mm) overall and in the template's top height quartile (straps and neckline), the bodice's mean
-drop below the prior (mm) and the CPU seconds.
+the first template tops and dresses of a generation plan (training split, unpaired, under 900 vertices) through the
+generator's own ``simulate_job`` in three pin set-ups: the band pins; no pins at all (the garment hangs on its straps
+by contact and friction); pins where the straps cross the shoulders, skinned by the torso alone (``crest``). Per run:
+accepted or the rejection, and per settled target the mean error of the skinning prior against the simulation (mm)
+overall and in the template's top height quartile (straps and neckline), the bodice's mean drop below the prior (mm)
+and the CPU seconds.
 
-    .venv/bin/python examples/strap_support.py --json docs/studies/strap_support.json   # ~20 CPU minutes
+    .venv/bin/python examples/strap_support.py --json docs/studies/anatomy/strap_support.json   # ~10 CPU minutes
 """
 
 import argparse
@@ -19,7 +20,9 @@ import numpy as np
 from garsim.physics import generate
 from garsim.physics.generate import GenerateConfig, JobSpec, plan_jobs, simulate_job
 
-VARIANTS = ("band", "none")
+VARIANTS = ("band", "none", "crest")
+TORSO_BONES = ("root", "spine", "clavicle", "neck", "head")
+"""Bones whose skinning the crest pins follow (prefixes of Anny's bone labels): not the arms."""
 
 
 def jobs(config: GenerateConfig, per_family: int, max_vertices: int = 900) -> list[JobSpec]:
@@ -43,19 +46,69 @@ def unpinned(build):
     return build_free
 
 
+def crest_pinned(build):
+    """``build_garment`` with the bodice released and the straps pinned where they cross the shoulders (the
+    vertices within ``SHOULDER_PIN_BAND`` of the garment's top)."""
+
+    def build_crest(job, body):
+        g = build(job, body)
+        g.pinned[:] = g.vertices[:, 2] >= g.vertices[:, 2].max() - generate.SHOULDER_PIN_BAND
+        return g
+
+    return build_crest
+
+
+class TorsoSkinned:
+    """A body whose skinning weights keep only the torso's bones (renormalised): where the crest pins go."""
+
+    def __init__(self, body) -> None:
+        self.__dict__.update(body=body, faces=body.faces, skin_indices=body.skin_indices)
+        keep = np.array([label.startswith(TORSO_BONES) for label in body.bone_labels])
+        w = np.asarray(body.skin_weights, dtype=np.float64) * keep[np.asarray(body.skin_indices)]
+        total = w.sum(axis=1, keepdims=True)
+        self.skin_weights = np.where(total > 0, w / np.maximum(total, 1e-12), body.skin_weights)
+
+
+def torso_pins(prior, pin_count: list[int]):
+    """``garment_prior`` that skins the pins (the calls with exactly ``pin_count[0]`` points) by the torso alone."""
+
+    def skinned(body, canonical, target, garment):
+        if len(garment) == pin_count[0]:
+            return prior(TorsoSkinned(body), canonical, target, garment)
+        return prior(body, canonical, target, garment)
+
+    return skinned
+
+
 def run(job: JobSpec, config: GenerateConfig, variant: str) -> dict:
     """One job under one pin variant: acceptance and the prior's error against each settled target."""
     t = time.process_time()
-    free = variant == "none"
-    patch = mock.patch.object(generate, "build_garment", unpinned(generate.build_garment)) if free else None
+    patches = []
+    if variant == "none":
+        patches.append(mock.patch.object(generate, "build_garment", unpinned(generate.build_garment)))
+    if variant == "crest":
+        from garsim.bodies import prior
+
+        pins: list[int] = [-1]
+        build = crest_pinned(generate.build_garment)
+
+        def build_counted(job, body):
+            g = build(job, body)
+            pins[0] = int(g.pinned.sum())
+            return g
+
+        patches += [
+            mock.patch.object(generate, "build_garment", build_counted),
+            mock.patch.object(prior, "garment_prior", torso_pins(prior.garment_prior, pins)),
+        ]
     try:
-        if patch:
+        for patch in patches:
             patch.start()
         records, rejections = simulate_job(job, config)
     except Exception as exc:  # noqa: BLE001 - a rejected template is a result here
         return {"job": job.job_id, "family": job.family, "variant": variant, "rejected": f"{type(exc).__name__}: {exc}"}
     finally:
-        if patch:
+        for patch in patches:
             patch.stop()
     row = {"job": job.job_id, "family": job.family, "variant": variant, "cpu_s": time.process_time() - t}
     row["rejections"] = [f"{r['reason']}: {r['detail']}" for r in rejections]
@@ -82,11 +135,12 @@ def main() -> None:
     parser.add_argument("--json", required=True)
     parser.add_argument("--seed", type=int, default=1)
     parser.add_argument("--per-family", type=int, default=3)
+    parser.add_argument("--variants", nargs="+", choices=VARIANTS, default=list(VARIANTS))
     args = parser.parse_args()
     config = GenerateConfig(out="unused", seed=args.seed)
     rows = []
     for job in jobs(config, args.per_family):
-        for variant in VARIANTS:
+        for variant in args.variants:
             rows.append(run(job, config, variant))
             print(json.dumps(rows[-1]), flush=True)
     with open(args.json, "w") as f:
