@@ -13,6 +13,7 @@ and the CPU seconds.
 import argparse
 import json
 import time
+from dataclasses import replace
 from unittest import mock
 
 import numpy as np
@@ -21,8 +22,7 @@ from garsim.physics import generate
 from garsim.physics.generate import GenerateConfig, JobSpec, plan_jobs, simulate_job
 
 VARIANTS = ("band", "none", "crest")
-TORSO_BONES = ("root", "spine", "clavicle", "neck", "head")
-"""Bones whose skinning the crest pins follow (prefixes of Anny's bone labels): not the arms."""
+"""Pin set-ups: ``GenerateConfig.strap_pins`` "band" and "crest", and "none" (every pin released)."""
 
 
 def jobs(config: GenerateConfig, per_family: int, max_vertices: int = 900) -> list[JobSpec]:
@@ -38,77 +38,27 @@ def jobs(config: GenerateConfig, per_family: int, max_vertices: int = 900) -> li
 def unpinned(build):
     """``build_garment`` with every pin released."""
 
-    def build_free(job, body):
-        g = build(job, body)
+    def build_free(job, body, strap_pins):
+        g = build(job, body, strap_pins)
         g.pinned[:] = False
         return g
 
     return build_free
 
 
-def crest_pinned(build):
-    """``build_garment`` with the bodice released and the straps pinned where they cross the shoulders (the
-    vertices within ``SHOULDER_PIN_BAND`` of the garment's top)."""
-
-    def build_crest(job, body):
-        g = build(job, body)
-        g.pinned[:] = g.vertices[:, 2] >= g.vertices[:, 2].max() - generate.SHOULDER_PIN_BAND
-        return g
-
-    return build_crest
-
-
-class TorsoSkinned:
-    """A body whose skinning weights keep only the torso's bones (renormalised): where the crest pins go."""
-
-    def __init__(self, body) -> None:
-        self.__dict__.update(body=body, faces=body.faces, skin_indices=body.skin_indices)
-        keep = np.array([label.startswith(TORSO_BONES) for label in body.bone_labels])
-        w = np.asarray(body.skin_weights, dtype=np.float64) * keep[np.asarray(body.skin_indices)]
-        total = w.sum(axis=1, keepdims=True)
-        self.skin_weights = np.where(total > 0, w / np.maximum(total, 1e-12), body.skin_weights)
-
-
-def torso_pins(prior, pin_count: list[int]):
-    """``garment_prior`` that skins the pins (the calls with exactly ``pin_count[0]`` points) by the torso alone."""
-
-    def skinned(body, canonical, target, garment):
-        if len(garment) == pin_count[0]:
-            return prior(TorsoSkinned(body), canonical, target, garment)
-        return prior(body, canonical, target, garment)
-
-    return skinned
-
-
 def run(job: JobSpec, config: GenerateConfig, variant: str) -> dict:
     """One job under one pin variant: acceptance and the prior's error against each settled target."""
     t = time.process_time()
-    patches = []
-    if variant == "none":
-        patches.append(mock.patch.object(generate, "build_garment", unpinned(generate.build_garment)))
-    if variant == "crest":
-        from garsim.bodies import prior
-
-        pins: list[int] = [-1]
-        build = crest_pinned(generate.build_garment)
-
-        def build_counted(job, body):
-            g = build(job, body)
-            pins[0] = int(g.pinned.sum())
-            return g
-
-        patches += [
-            mock.patch.object(generate, "build_garment", build_counted),
-            mock.patch.object(prior, "garment_prior", torso_pins(prior.garment_prior, pins)),
-        ]
+    free = variant == "none"
+    patch = mock.patch.object(generate, "build_garment", unpinned(generate.build_garment)) if free else None
     try:
-        for patch in patches:
+        if patch:
             patch.start()
-        records, rejections = simulate_job(job, config)
+        records, rejections = simulate_job(job, replace(config, strap_pins="band" if free else variant))
     except Exception as exc:  # noqa: BLE001 - a rejected template is a result here
         return {"job": job.job_id, "family": job.family, "variant": variant, "rejected": f"{type(exc).__name__}: {exc}"}
     finally:
-        for patch in patches:
+        if patch:
             patch.stop()
     row = {"job": job.job_id, "family": job.family, "variant": variant, "cpu_s": time.process_time() - t}
     row["rejections"] = [f"{r['reason']}: {r['detail']}" for r in rejections]

@@ -52,6 +52,8 @@ FABRIC_HELP = (
 FAMILY_CHOICES: tuple[str, ...] = ("skirt", "top", "tshirt", "longsleeve", "trousers", "dress")
 """The garment families (``garsim.data.sample.GARMENT_TYPES``, repeated for the same reason)."""
 MODEL_CHOICES: tuple[str, ...] = ("garsim", "deepsd")
+STRAP_CHOICES: tuple[str, ...] = ("band", "crest")
+"""``garsim data generate --strap-pins`` (``garsim.physics.generate.STRAP_PINS``, repeated for the same reason)."""
 GROUP_CHOICES: tuple[str, ...] = ("canonical_pose", "construction", "fabric", "family", "paired", "pose_mode")
 """What `garsim eval --by` groups rows by (``garsim.eval.experiments.GROUPS``, repeated for the same reason)."""
 MESH_OUTPUTS: tuple[str, ...] = (".obj", ".ply", ".glb", ".off", ".stl")
@@ -479,6 +481,7 @@ def cmd_data_generate(args: argparse.Namespace) -> int:
         "min_vertices": args.min_vertices,
         "max_vertices": args.max_vertices,
         "targets_per_job": args.targets,
+        "strap_pins": args.strap_pins,
     }
     cfg = GenerateConfig(
         out=Path(args.out),
@@ -1087,6 +1090,16 @@ def build_parser() -> argparse.ArgumentParser:
         ),
         *gen,
         "targets_per_job",
+    )
+    _config_default(
+        p.add_argument(
+            "--strap-pins",
+            choices=STRAP_CHOICES,
+            help="how parametric tops and dresses are held: their bodice's top ring (their straps slide) or pins where "
+            "the straps cross the shoulders, skinned by the torso (docs/studies/anatomy.md)",
+        ),
+        *gen,
+        "strap_pins",
     )
     p.add_argument("--workers", type=int, default=2, help="parallel simulation processes")
     p.add_argument("--shard", type=_shard, default=(0, 1), help="K/N: run every N-th job from K")

@@ -69,3 +69,23 @@ def test_sparse_lbs_prior_equals_dense_weight_transfer(body):
     g = shell(body, offset=0.03, step=9)
     w = transfer_weights(g, c.vertices, dense_weights(body.skin_indices, body.skin_weights, len(c.transforms)))
     np.testing.assert_allclose(garment_prior(body, c, t, g), lbs_prior(g, w, c.transforms, t.transforms), atol=2e-6)
+
+
+def test_prior_skinned_by_some_bones_ignores_the_others(body):
+    """``bones``: skinned by the torso's bones alone, points around the torso and shoulders stay put when only an arm
+    rises, where the plain prior drags the shoulder's skin along; a mask of every bone is the plain prior."""
+    from garsim.physics.generate import TORSO_BONES
+
+    c = body.canonical()
+    raised = body.pose({"upperarm01.L": [0.0, -0.6, 0.0]})  # one arm only: no torso bone moves
+    g = shell(body, step=1)
+    near = g[np.abs(g[:, 0] - c.vertices[:, 0].mean()) < 0.2]  # torso and shoulders, not the arms beyond
+    torso = body.bone_mask(TORSO_BONES)
+    assert 5 < torso.sum() < len(torso) and not torso[body.bone_index("upperarm01.L")]
+    plain = garment_prior(body, c, raised, near)
+    held = garment_prior(body, c, raised, near, torso)
+    dragged, kept = np.linalg.norm(plain - near, axis=1), np.linalg.norm(held - near, axis=1)
+    assert dragged.max() > 0.01 and (dragged > 1e-3).sum() > 50  # the shoulder's skin moves with the arm
+    # still, but where the anchoring skin has no torso weight at all (the armpit's arm side keeps its own weights)
+    assert np.percentile(kept, 99) < 1e-5 and kept.max() < 0.2 * dragged.max()
+    np.testing.assert_allclose(garment_prior(body, c, raised, near, np.ones(len(torso), bool)), plain, atol=1e-6)

@@ -254,15 +254,17 @@ def test_cli_choices_match_the_library():
         MESH_OUTPUTS,
         MODEL_CHOICES,
         MOTION_CHOICES,
+        STRAP_CHOICES,
     )
     from garsim.data.sample import FABRICS, GARMENT_TYPES
     from garsim.eval.experiments import GROUPS
     from garsim.export import SUPPORTED_EXTENSIONS
     from garsim.geometry.io import SUPPORTED_EXTENSIONS as MESH_EXTENSIONS
     from garsim.model.baselines import MODELS
+    from garsim.physics.generate import STRAP_PINS
 
     assert FABRIC_CHOICES == FABRICS and MOTION_CHOICES == MOTIONS and set(MODEL_CHOICES) == set(MODELS)
-    assert FAMILY_CHOICES == GARMENT_TYPES and GROUP_CHOICES == tuple(sorted(GROUPS))
+    assert FAMILY_CHOICES == GARMENT_TYPES and GROUP_CHOICES == tuple(sorted(GROUPS)) and STRAP_CHOICES == STRAP_PINS
     assert set(ANIMATION_OUTPUTS) == set(SUPPORTED_EXTENSIONS) | {".npz"}  # .npz: the viewer's sequence
     assert set(MESH_OUTPUTS) == set(MESH_EXTENSIONS) - {".gltf"} and set(MESH_INPUTS) == set(MESH_EXTENSIONS)
 

@@ -153,6 +153,43 @@ def test_a_rerun_with_other_settings_is_refused(tmp_path, monkeypatch):
         gen.generate(GenerateConfig(out=tmp_path, num_train=4, num_test=1, num_ood=0, workers=1), progress=False)
 
 
+def test_strap_pins_bind_the_folder_only_when_not_the_legacy_band(tmp_path, monkeypatch):
+    """``strap_pins="band"`` is left out of ``settings()`` (folders made before it match); "crest" is a setting, so
+    a band folder refuses a crest rerun; an unknown value is refused."""
+    monkeypatch.setattr(gen, "_run_one", lambda args: {"entries": [], "rejections": []})
+    band = GenerateConfig(out=tmp_path, num_train=2, num_test=0, num_ood=0, workers=1)
+    assert "strap_pins" not in band.settings() and replace(band, strap_pins="crest").settings()["strap_pins"] == "crest"
+    gen.generate(band, progress=False)
+    with pytest.raises(ValueError, match="strap_pins"):
+        gen.generate(replace(band, strap_pins="crest"), progress=False)
+    with pytest.raises(ValueError, match="strap_pins must be one of"):
+        GenerateConfig(out=tmp_path, strap_pins="straps")
+
+
+@pytest.mark.parametrize("strap_pins", ["band", "crest"])
+def test_strapped_templates_are_pinned_at_the_bodice_or_at_the_straps_crest(strap_pins, tmp_path):
+    """A parametric top: "band" pins its bodice's top ring (below the shoulders), "crest" only the straps within
+    ``SHOULDER_PIN_BAND`` of its top; implicit tops and the other families keep their pins either way."""
+    from garsim.bodies.anny import AnnyBody
+
+    cfg = GenerateConfig(out=tmp_path, num_train=24, num_test=0, num_ood=0, strap_pins=strap_pins)
+    jobs = plan_jobs(cfg)
+    top = next(j for j in jobs if j.family == "top" and j.construction == "template")
+    skirt = next(j for j in jobs if j.family == "skirt" and j.construction == "template")
+    body = AnnyBody(top.phenotype)
+    g = gen.build_garment(top, body, strap_pins)
+    z, zp = g.vertices[:, 2], g.vertices[g.pinned, 2]
+    assert g.pinned.sum() > 4
+    if strap_pins == "crest":
+        assert zp.min() >= z.max() - gen.SHOULDER_PIN_BAND - 1e-6 and np.isclose(zp.max(), z.max())
+    else:
+        assert zp.max() < z.max() - gen.SHOULDER_PIN_BAND  # the bodice's ring, below the straps
+    skirt_body = AnnyBody(skirt.phenotype)
+    np.testing.assert_array_equal(
+        gen.build_garment(skirt, skirt_body, strap_pins).pinned, gen.build_garment(skirt, skirt_body).pinned
+    )
+
+
 def test_shards_partition_the_jobs(tmp_path, monkeypatch):
     ran = []
     monkeypatch.setattr(gen, "_run_one", lambda args: ran.append(args[0].index) or {"entries": [], "rejections": []})
@@ -313,7 +350,7 @@ def test_a_garment_the_validator_refuses_is_a_named_rejection(tmp_path, monkeypa
 
     v = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [2, 0, 0]], dtype=np.float32)
     f = np.array([[0, 1, 2], [0, 1, 3]])  # the second face is collinear: zero area
-    monkeypatch.setattr(gen, "build_garment", lambda job, body: Garment(v, f, np.zeros(4, bool), job.family, {}))
+    monkeypatch.setattr(gen, "build_garment", lambda job, body, _pins: Garment(v, f, np.zeros(4, bool), job.family, {}))
     cfg = GenerateConfig(out=tmp_path, num_train=1, num_test=0, num_ood=0, workers=1)
     with pytest.raises(SimulationRejected) as err:
         gen.simulate_job(plan_jobs(cfg)[0], cfg)

@@ -150,6 +150,10 @@ class AnnyBody(BodyModel):
         except ValueError:
             raise ValueError(f"unknown bone {name!r}; Anny bones include {self.bone_labels[:8]}...") from None
 
+    def bone_mask(self, prefixes: tuple[str, ...]) -> np.ndarray:
+        """(J,) bool: the bones whose labels start with one of ``prefixes`` (e.g. ``TORSO_BONES``)."""
+        return np.array([label.startswith(prefixes) for label in self.bone_labels])
+
     def pose_batch(self, pose: PoseSpec | None) -> tuple[np.ndarray, np.ndarray]:
         """Batched posing: returns vertices (B, V, 3) float32 and skinning transforms (B, J, 4, 4)."""
         with torch.no_grad():

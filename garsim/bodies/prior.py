@@ -64,9 +64,12 @@ def rigfree_prior(garment: np.ndarray, canonical: np.ndarray, target: np.ndarray
     return out.astype(np.float32)
 
 
-def garment_prior(body: BodyModel, canonical: PosedBody, target: PosedBody, garment: np.ndarray) -> np.ndarray:
+def garment_prior(
+    body: BodyModel, canonical: PosedBody, target: PosedBody, garment: np.ndarray, bones: np.ndarray | None = None
+) -> np.ndarray:
     """G^prior of ``garment`` (draped on ``canonical``) on ``target``: the LBS prior with the skinning weights
-    of the soft anchor's nearby body vertices (the rig-free prior for bodies without a rig)."""
+    of the soft anchor's nearby body vertices (the rig-free prior for bodies without a rig). ``bones`` ((J,) bool):
+    skin with those bones' weights alone, renormalised (a body vertex with none of them keeps its own)."""
     if body.skin_weights is None or canonical.transforms is None or target.transforms is None:
         return rigfree_prior(garment, canonical.vertices, target.vertices, body.faces)
     # Same as lbs_prior(garment, transfer_weights(garment, canonical, dense_weights(...)), ...): blending is
@@ -77,6 +80,10 @@ def garment_prior(body: BodyModel, canonical: PosedBody, target: PosedBody, garm
     w = w[:, used]
     si = np.asarray(body.skin_indices)[used]
     sw = np.asarray(body.skin_weights, dtype=np.float64)[used]
+    if bones is not None:
+        kept = sw * np.asarray(bones, dtype=bool)[si]
+        total = kept.sum(axis=1, keepdims=True)
+        sw = np.where(total > 0, kept / np.maximum(total, 1e-300), sw)
     g = np.asarray(garment, dtype=np.float64)
 
     def blended(transforms: np.ndarray) -> np.ndarray:

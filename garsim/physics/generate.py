@@ -58,6 +58,12 @@ CONSTRUCTIONS: tuple[str, ...] = ("template", "implicit")
 PAIRING_CYCLE = len(FAMILIES) * len(CONSTRUCTIONS)
 """Jobs in one pass over every family and construction (a job's family is j % 6, its construction (j // 6) % 2)."""
 WAIST_FAMILIES: frozenset[str] = frozenset({"skirt", "trousers"})
+STRAP_PINS: tuple[str, ...] = ("band", "crest")
+"""``GenerateConfig.strap_pins`` choices (the first is the legacy default)."""
+STRAPPED_FAMILIES: frozenset[str] = frozenset({"top", "dress"})
+"""Families whose parametric templates hang on straps (``garments/templates/builders.py: _band_pins``)."""
+TORSO_BONES: tuple[str, ...] = ("root", "spine", "clavicle", "neck", "head")
+"""Anny bone-label prefixes that skin crest pins: not the arms, so a raised arm does not drag a strap's crest."""
 SHOULDER_PIN_BAND = 0.04
 """m: garments hung from the shoulders keep only the pins this close below their highest pin (pins that run
 down a strap towards the armpit follow the skinned arm and tore the cloth next to them: 1.8x edges)."""
@@ -106,6 +112,9 @@ class GenerateConfig:
     paired_first: bool = False  # run the paired-fabric jobs before the others (same jobs, another order)
     sim: dict[str, Any] = field(default_factory=dict)  # SimConfig overrides
     plan_version: int = 2  # the job-planning rule (2: paired groups in every family); other folders are refused
+    # how parametric tops and dresses are held: "band" (their bodice's top ring; the straps slide) or "crest" (pins
+    # where the straps cross the shoulders, skinned by the torso alone; docs/studies/anatomy.md)
+    strap_pins: str = "band"
 
     def __post_init__(self) -> None:
         self.out = Path(self.out)
@@ -125,6 +134,8 @@ class GenerateConfig:
             raise ValueError(f"low_ratio must be in [0.05, 1], got {self.low_ratio}")
         if self.workers < 1 or self.paired_every < 1 or not (0.0 <= self.physical_share <= 1.0):
             raise ValueError("workers >= 1, paired_every >= 1 and physical_share in [0, 1] required")
+        if self.strap_pins not in STRAP_PINS:
+            raise ValueError(f"strap_pins must be one of {STRAP_PINS}, got {self.strap_pins!r}")
 
     def settings(self) -> dict[str, Any]:
         """The settings a dataset folder is bound to (counts may grow, the rest must match)."""
@@ -133,6 +144,8 @@ class GenerateConfig:
         d = asdict(self)
         for key in ("out", "num_train", "num_test", "num_ood", "workers", "shard", "limit", "paired_first"):
             d.pop(key)
+        if d["strap_pins"] == STRAP_PINS[0]:  # added later: folders made before it still match
+            d.pop("strap_pins")
         sim = asdict(SimConfig(**self.sim))  # the effective simulator settings, defaults included
         for key in EXECUTION_SIM_SETTINGS:
             sim.pop(key)
@@ -308,8 +321,13 @@ def target_poses(job: JobSpec, body: Any) -> list[dict[str, np.ndarray]]:
     return poses
 
 
-def build_garment(job: JobSpec, body: Any) -> Any:
-    """The job's garment on the T-pose canonical body (either construction)."""
+def crest_pinned(job: JobSpec, strap_pins: str) -> bool:
+    """Whether the job's garment hangs on pins at its straps' crest (``GenerateConfig.strap_pins``)."""
+    return strap_pins == "crest" and job.construction == "template" and job.family in STRAPPED_FAMILIES
+
+
+def build_garment(job: JobSpec, body: Any, strap_pins: str = STRAP_PINS[0]) -> Any:
+    """The job's garment on the T-pose canonical body (either construction), pinned as ``strap_pins`` says."""
     from garsim.garments.implicit import make_implicit_garment
     from garsim.garments.templates import make_garment
 
@@ -327,7 +345,9 @@ def build_garment(job: JobSpec, body: Any) -> Any:
             target_vertices=job.vertices,
         )
     g.params["construction"] = job.construction
-    if job.family not in WAIST_FAMILIES:  # hung from the shoulders: pin only their tops
+    if crest_pinned(job, strap_pins):  # the straps' crest over the shoulders, not the bodice's ring
+        g.pinned[:] = g.vertices[:, 2] >= g.vertices[:, 2].max() - SHOULDER_PIN_BAND
+    elif job.family not in WAIST_FAMILIES:  # hung from the shoulders: pin only their tops
         g.pinned &= g.vertices[:, 2] >= g.vertices[g.pinned, 2].max() - SHOULDER_PIN_BAND
     return g
 
@@ -354,7 +374,7 @@ def simulate_job(
     body = AnnyBody(job.phenotype)
     tpose = body.canonical()
     try:
-        garment = build_garment(job, body)
+        garment = build_garment(job, body, config.strap_pins)
         validate_mesh(garment.vertices, garment.faces, f"{job.construction} {job.family}")
     except MeshError as exc:  # a construction that yields a broken mesh is a permanent, named rejection
         raise SimulationRejected(REJECT_INVALID_GARMENT, str(exc)) from None
@@ -393,6 +413,7 @@ def simulate_job(
     if visit is not None:
         poses, modes = [poses[i] for i in visit], [modes[i] for i in visit]
     pins = np.flatnonzero(garment.pinned)
+    pin_bones = body.bone_mask(TORSO_BONES) if crest_pinned(job, config.strap_pins) else None
     chain = [arm_pose, *poses]
     body_segs, pin_segs, targets = [], [], []
     for a, b in zip(chain[:-1], chain[1:]):
@@ -402,7 +423,10 @@ def simulate_job(
         body_segs.append(verts)
         pin_segs.append(
             np.stack(
-                [garment_prior(body, canonical, PosedBody(v, t), template[pins]) for v, t in zip(verts, transforms)]
+                [
+                    garment_prior(body, canonical, PosedBody(v, t), template[pins], pin_bones)
+                    for v, t in zip(verts, transforms)
+                ]
             )
         )
         targets.append(PosedBody(verts[-1], transforms[-1]))
