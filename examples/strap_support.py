@@ -86,15 +86,21 @@ def main() -> None:
     parser.add_argument("--seed", type=int, default=1)
     parser.add_argument("--per-family", type=int, default=3)
     parser.add_argument("--variants", nargs="+", choices=VARIANTS, default=list(VARIANTS))
+    parser.add_argument("--max-vertices", type=int, default=900, help="skip larger garments (cheaper runs)")
     args = parser.parse_args()
     config = GenerateConfig(out="unused", seed=args.seed)
     rows = []
-    for job in jobs(config, args.per_family):
+    for job in jobs(config, args.per_family, args.max_vertices):
         for variant in args.variants:
             rows.append(run(job, config, variant))
             print(json.dumps(rows[-1]), flush=True)
     with open(args.json, "w") as f:
         json.dump(rows, f, indent=1)
+    for variant in args.variants:
+        for family in ("top", "dress"):
+            mine = [r for r in rows if r["variant"] == variant and r["family"] == family]
+            ok = sum("rejected" not in r and not r["rejections"] for r in mine)
+            print(f"{variant} {family}: {ok} of {len(mine)} jobs accepted")
 
 
 if __name__ == "__main__":
