@@ -25,9 +25,12 @@ VARIANTS = ("band", "none", "crest")
 """Pin set-ups: ``GenerateConfig.strap_pins`` "band" and "crest", and "none" (every pin released)."""
 
 
-def jobs(config: GenerateConfig, per_family: int, max_vertices: int = 900) -> list[JobSpec]:
-    """The first ``per_family`` unpaired template tops and dresses of the training split under ``max_vertices``."""
-    picked: dict[str, list[JobSpec]] = {"top": [], "dress": []}
+def jobs(
+    config: GenerateConfig, per_family: int, max_vertices: int = 900, families: tuple[str, ...] = ("top", "dress")
+) -> list[JobSpec]:
+    """The first ``per_family`` unpaired template jobs of each of ``families`` in the training split under
+    ``max_vertices``."""
+    picked: dict[str, list[JobSpec]] = {f: [] for f in families}
     for job in plan_jobs(config):
         if job.split == "train" and not job.paired and job.construction == "template" and job.vertices < max_vertices:
             if job.family in picked and len(picked[job.family]) < per_family:
@@ -87,17 +90,18 @@ def main() -> None:
     parser.add_argument("--per-family", type=int, default=3)
     parser.add_argument("--variants", nargs="+", choices=VARIANTS, default=list(VARIANTS))
     parser.add_argument("--max-vertices", type=int, default=900, help="skip larger garments (cheaper runs)")
+    parser.add_argument("--families", nargs="+", choices=("top", "dress"), default=["top", "dress"])
     args = parser.parse_args()
     config = GenerateConfig(out="unused", seed=args.seed)
     rows = []
-    for job in jobs(config, args.per_family, args.max_vertices):
+    for job in jobs(config, args.per_family, args.max_vertices, tuple(args.families)):
         for variant in args.variants:
             rows.append(run(job, config, variant))
             print(json.dumps(rows[-1]), flush=True)
     with open(args.json, "w") as f:
         json.dump(rows, f, indent=1)
     for variant in args.variants:
-        for family in ("top", "dress"):
+        for family in args.families:
             mine = [r for r in rows if r["variant"] == variant and r["family"] == family]
             ok = sum("rejected" not in r and not r["rejections"] for r in mine)
             print(f"{variant} {family}: {ok} of {len(mine)} jobs accepted")
