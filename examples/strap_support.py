@@ -91,10 +91,13 @@ def main() -> None:
     parser.add_argument("--variants", nargs="+", choices=VARIANTS, default=list(VARIANTS))
     parser.add_argument("--max-vertices", type=int, default=900, help="skip larger garments (cheaper runs)")
     parser.add_argument("--families", nargs="+", choices=("top", "dress"), default=["top", "dress"])
+    parser.add_argument("--train-jobs", type=int, default=600, help="training jobs of the plan drawn from")
+    parser.add_argument("--skip", type=int, default=0, help="leave out the first N jobs of each family (resume)")
     args = parser.parse_args()
-    config = GenerateConfig(out="unused", seed=args.seed)
+    config = GenerateConfig(out="unused", seed=args.seed, num_train=args.train_jobs)
     rows = []
-    for job in jobs(config, args.per_family, args.max_vertices, tuple(args.families)):
+    picked = jobs(config, args.skip + args.per_family, args.max_vertices, tuple(args.families))
+    for job in [j for f in args.families for j in [j for j in picked if j.family == f][args.skip :]]:
         for variant in args.variants:
             rows.append(run(job, config, variant))
             print(json.dumps(rows[-1]), flush=True)
