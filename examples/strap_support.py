@@ -26,16 +26,16 @@ VARIANTS = ("band", "none", "crest")
 
 
 def jobs(
-    config: GenerateConfig, per_family: int, max_vertices: int = 900, families: tuple[str, ...] = ("top", "dress")
+    config: GenerateConfig, per_family: int, max_vertices: int, families: tuple[str, ...], skip: int = 0
 ) -> list[JobSpec]:
-    """The first ``per_family`` unpaired template jobs of each of ``families`` in the training split under
-    ``max_vertices``."""
+    """The unpaired template jobs of each of ``families`` in the training split under ``max_vertices``, after the
+    first ``skip`` of each family, ``per_family`` of each, family by family."""
     picked: dict[str, list[JobSpec]] = {f: [] for f in families}
     for job in plan_jobs(config):
         if job.split == "train" and not job.paired and job.construction == "template" and job.vertices < max_vertices:
-            if job.family in picked and len(picked[job.family]) < per_family:
+            if job.family in picked:
                 picked[job.family].append(job)
-    return [j for js in picked.values() for j in js]
+    return [j for f in families for j in picked[f][skip : skip + per_family]]
 
 
 def unpinned(build):
@@ -96,8 +96,7 @@ def main() -> None:
     args = parser.parse_args()
     config = GenerateConfig(out="unused", seed=args.seed, num_train=args.train_jobs)
     rows = []
-    picked = jobs(config, args.skip + args.per_family, args.max_vertices, tuple(args.families))
-    for job in [j for f in args.families for j in [j for j in picked if j.family == f][args.skip :]]:
+    for job in jobs(config, args.per_family, args.max_vertices, tuple(args.families), args.skip):
         for variant in args.variants:
             rows.append(run(job, config, variant))
             print(json.dumps(rows[-1]), flush=True)

@@ -27,7 +27,7 @@ from garsim.data.store import DatasetStore, GarmentLevel, SequenceRecord
 from garsim.eval.experiments import evaluate_split, score_predictions
 from garsim.garments.remesh import subdivide, transfer_barycentric
 from garsim.geometry.mesh import cached_vertex_normals, surface_smoother
-from garsim.geometry.proximity import soft_anchor
+from garsim.geometry.proximity import soft_surface
 from garsim.geometry.render import DEFAULT_COLORS, render_views
 from garsim.model.baselines import load_model
 from garsim.model.config import HEADS, GarSimConfig
@@ -390,11 +390,8 @@ def anatomy_row(
     body's normal (at the simulated vertex's soft anchor) and across it, and the mean error in each of
     ``ANATOMY_BANDS`` height bands of the template, lowest first; ``cosine``: the prediction's correction over the
     prior against the simulator's (1: the right direction, 0: unrelated)."""
-    body = np.asarray(body_target, dtype=np.float64)
     truth = np.asarray(target, dtype=np.float64)
-    w = soft_anchor(truth, body)
-    n = w @ cached_vertex_normals(body, np.asarray(body_faces, dtype=np.int64)).astype(np.float64)
-    n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-12)
+    _, n = soft_surface(truth, body_target, cached_vertex_normals(body_target, np.asarray(body_faces, dtype=np.int64)))
     z = np.asarray(template, dtype=np.float64)[:, 2]
     band = np.minimum((np.argsort(np.argsort(z, kind="stable")) * ANATOMY_BANDS) // len(z), ANATOMY_BANDS - 1)
     row: dict[str, float] = {}

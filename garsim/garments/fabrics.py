@@ -107,14 +107,14 @@ def get_fabric(fabric: str | Fabric) -> Fabric:
 def fabric_from_values(values: dict[str, float], name: str = "custom") -> Fabric:
     """A ``Fabric`` from stored physical values (``Fabric.values()``); missing optional keys take defaults.
     Raises ValueError naming the missing or unknown keys."""
-    known = [f.name for f in fields(Fabric) if f.name != "name"]
+    optional = [f.name for f in fields(Fabric) if f.name not in ("name", *_LOG_KEYS)]
     missing = [k for k in _LOG_KEYS if k not in values]
-    unknown = sorted(set(values) - set(known))
-    if missing or unknown:
+    unknown = sorted(set(values) - set(_LOG_KEYS) - set(optional))
+    problems = [f"{what} {', '.join(keys)}" for what, keys in (("missing", missing), ("unknown", unknown)) if keys]
+    if problems:
         raise ValueError(
-            f"fabric values: {'missing ' + ', '.join(missing) if missing else ''}"
-            f"{'; ' if missing and unknown else ''}{'unknown ' + ', '.join(unknown) if unknown else ''}; "
-            f"give bending (N·m), density (kg/m²), stretch (N/m), optionally {', '.join(known[3:])}"
+            f"fabric values: {'; '.join(problems)}; give bending (N·m), density (kg/m²), stretch (N/m), optionally "
+            + ", ".join(optional)
         )
     return Fabric(name=name, **values)
 

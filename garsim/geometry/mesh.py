@@ -97,10 +97,10 @@ def cached_vertex_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray
     return _NORMALS.get(content_key(vertices, faces), compute)
 
 
-def edge_adjacency(faces: np.ndarray, num_vertices: int, weights: np.ndarray | None = None) -> sp.csr_matrix:
-    """Symmetric (V, V) adjacency of the mesh edges (``unique_edges`` order), each edge's weight (default 1) at
-    (i, j) and (j, i)."""
-    e = unique_edges(faces)
+def edge_adjacency(edges: np.ndarray, num_vertices: int, weights: np.ndarray | None = None) -> sp.csr_matrix:
+    """Symmetric (V, V) adjacency of (E, 2) undirected ``edges`` (e.g. ``unique_edges(faces)``), each edge's weight
+    (default 1) at (i, j) and (j, i)."""
+    e = np.asarray(edges, dtype=np.int64)
     w = np.ones(len(e)) if weights is None else np.asarray(weights, dtype=np.float64)
     rows = np.concatenate([e[:, 0], e[:, 1]])
     cols = np.concatenate([e[:, 1], e[:, 0]])
@@ -109,7 +109,7 @@ def edge_adjacency(faces: np.ndarray, num_vertices: int, weights: np.ndarray | N
 
 def uniform_laplacian(faces: np.ndarray, num_vertices: int) -> sp.csr_matrix:
     """Uniform Laplacian L = I - D^-1 A (rows sum to zero); L @ V is each vertex minus its neighbours' mean."""
-    adj = edge_adjacency(faces, num_vertices)
+    adj = edge_adjacency(unique_edges(faces), num_vertices)
     deg = np.asarray(adj.sum(axis=1)).ravel()
     inv = np.where(deg > 0, 1.0 / np.maximum(deg, 1), 0.0)
     return (sp.identity(num_vertices, format="csr") - sp.diags(inv) @ adj).tocsr()
@@ -124,7 +124,7 @@ def surface_smoother(vertices: np.ndarray, faces: np.ndarray, sigma: float) -> C
     v = np.asarray(vertices, dtype=np.float64)
     n = len(v)
     e = unique_edges(faces)
-    adj = edge_adjacency(faces, n, (2.0 / 3.0) / np.maximum(np.sum((v[e[:, 0]] - v[e[:, 1]]) ** 2, axis=1), 1e-12))
+    adj = edge_adjacency(e, n, (2.0 / 3.0) / np.maximum(np.sum((v[e[:, 0]] - v[e[:, 1]]) ** 2, axis=1), 1e-12))
     lap = sp.diags(np.asarray(adj.sum(axis=1)).ravel()) - adj
     solve = splu((sp.identity(n) + (0.5 * sigma * sigma) * lap).tocsc()).solve
     return lambda values: solve(np.asarray(values, dtype=np.float64))

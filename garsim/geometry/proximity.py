@@ -89,17 +89,26 @@ def signed_offset_to_nearest(points: np.ndarray, body_vertices: np.ndarray, body
     return np.einsum("ij,ij->i", np.asarray(points) - body_vertices[idx], body_normals[idx])
 
 
+def soft_surface(
+    points: np.ndarray, body_vertices: np.ndarray, body_normals: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """(N, 3) float64 each point's soft anchor on the body (``soft_anchor``'s blend of the body vertices near it) and
+    (N, 3) the same blend of the body's vertex normals, renormalised: a surface point and normal that move
+    continuously with the point (no jump where the nearest body vertex changes)."""
+    w = soft_anchor(points, body_vertices)
+    n = w @ np.asarray(body_normals, dtype=np.float64)
+    n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-12)
+    return w @ np.asarray(body_vertices, dtype=np.float64), n
+
+
 def push_outside(
     points: np.ndarray, body_vertices: np.ndarray, body_normals: np.ndarray, margin: float = 0.002
 ) -> np.ndarray:
     """Move points that are inside (or closer than ``margin`` to) the body out to ``margin`` in front of it,
-    along the soft anchor's blended normal (a continuous function of the point: no jump where the nearest
-    body vertex changes); other points are unchanged. A post-process for predicted garments."""
+    along the soft anchor's blended normal (``soft_surface``); other points are unchanged. A post-process for
+    predicted garments."""
     p = np.array(points, dtype=np.float64)
-    w = soft_anchor(p, body_vertices)
-    a = w @ np.asarray(body_vertices, dtype=np.float64)
-    n = w @ np.asarray(body_normals, dtype=np.float64)
-    n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-12)
+    a, n = soft_surface(p, body_vertices, body_normals)
     offset = np.einsum("ij,ij->i", p - a, n)
     fix = offset < margin
     p[fix] += (margin - offset[fix])[:, None] * n[fix]

@@ -34,9 +34,9 @@ from garsim.garments.fabrics import PRESETS as FABRIC_PRESETS
 from garsim.garments.fabrics import Fabric, fabric_from_values, get_fabric
 from garsim.geometry.cache import ContentCache, content_key
 from garsim.geometry.io import as_mesh
-from garsim.geometry.mesh import directed_edges, face_pairs, vertex_normals_at, vertex_rings
-from garsim.geometry.proximity import cached_tree, soft_anchor
-from garsim.model.config import FABRIC_FEATURES, SURFACE_FEATURES, GarSimConfig
+from garsim.geometry.mesh import cached_vertex_normals, directed_edges, face_pairs, vertex_rings
+from garsim.geometry.proximity import cached_tree, soft_anchor, soft_surface
+from garsim.model.config import FABRIC_FEATURES, GarSimConfig
 
 _BODIES = ContentCache(8)  # per canonical body: its BodyFrame
 _GARMENTS = ContentCache(8, scope="garment")  # per template garment: mesh rings and receiver-sorted edges
@@ -264,21 +264,14 @@ class StaticGraph:
 
 
 def target_surface(points: np.ndarray, body: np.ndarray, faces: np.ndarray, rot: np.ndarray) -> np.ndarray:
-    """(N, SURFACE_FEATURES) float32: per point, the offset from its soft anchor on ``body`` (``soft_anchor``: a
-    continuous blend of the body vertices near the closest one), the blend of their unit normals (renormalised) and
-    the signed distance along it (negative inside), vectors turned by ``rot`` (world -> body frame)."""
+    """(N, SURFACE_FEATURES) float32: per point, the offset from its soft anchor on ``body``, the body's blended unit
+    normal there (``soft_surface``) and the signed distance along it (negative inside), vectors turned by ``rot``
+    (world -> body frame). The body's normals are cached by content: the API's push-out of the same pose reuses them."""
     p = np.asarray(points, dtype=np.float64)
-    w = soft_anchor(p, body).tocsc()
-    sel = np.flatnonzero(np.diff(w.indptr))  # the body vertices in some blend
-    w = w[:, sel]
-    normals = vertex_normals_at(np.asarray(body, dtype=np.float64), np.asarray(faces, dtype=np.int64), sel)
-    n = w @ normals
-    n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-12)
-    offset = p - w @ np.asarray(body, dtype=np.float64)[sel]
+    anchor, n = soft_surface(p, body, cached_vertex_normals(body, faces))
+    offset = p - anchor
     dist = np.einsum("ij,ij->i", offset, n)[:, None]
-    out = np.concatenate([offset @ rot.T, n @ rot.T, dist], axis=1)
-    assert out.shape[1] == SURFACE_FEATURES
-    return out.astype(np.float32)
+    return np.concatenate([offset @ rot.T, n @ rot.T, dist], axis=1).astype(np.float32)
 
 
 _STATIC = ContentCache(8, scope="garment")  # per (garment, canonical body, input configuration): its StaticGraph
