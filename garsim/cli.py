@@ -490,6 +490,7 @@ def cmd_data_generate(args: argparse.Namespace) -> int:
         shard=args.shard,
         limit=args.limit,
         paired_first=args.paired_first,
+        reuse=Path(args.reuse) if args.reuse else None,
         sim={"graphs": False} if args.no_graphs else {},
         **{k: v for k, v in given.items() if v is not None},
     )
@@ -1108,6 +1109,12 @@ def build_parser() -> argparse.ArgumentParser:
         "--paired-first",
         action="store_true",
         help="run the paired-fabric groups before the other jobs (the same dataset, in another order)",
+    )
+    p.add_argument(
+        "--reuse",
+        metavar="DIR",
+        help="a dataset folder of the same seed: copy its finished jobs that these settings would simulate alike "
+        "(e.g. all but the parametric tops and dresses when only --strap-pins differs) instead of simulating them",
     )
     p.add_argument(
         "--no-graphs",

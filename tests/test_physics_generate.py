@@ -376,3 +376,36 @@ def test_settings_added_later_keep_older_folders_and_workers_refuse_changed_defa
     other = GenerateConfig(out=tmp_path, num_train=1, num_test=0, num_ood=0, sim={**legacy, "collide_every": 3})
     out = gen._run_one((plan_jobs(cfg)[0], other))
     assert "settings differ" in out["error"]["error"]
+
+
+def test_reuse_copies_the_jobs_other_strap_pins_leave_unchanged(tmp_path, monkeypatch):
+    """A crest folder reusing a band folder copies every finished job but the parametric tops and dresses (which it
+    simulates), files checked against their sha256, rejections kept; other differing settings copy nothing."""
+    monkeypatch.setattr(gen, "simulate_job", _fake_job)
+    monkeypatch.setenv("GARSIM_TEST_HEALED", "1")
+    src = tmp_path / "band"
+    band = GenerateConfig(out=src, num_train=24, num_test=0, num_ood=0, workers=1)
+    monkeypatch.setattr(gen, "plan_jobs", lambda c: [j for j in plan_jobs(c) if j.index != 5])  # no interrupt
+    gen.generate(band, progress=False)
+    source = DatasetStore(src)
+    ran = []
+    monkeypatch.setattr(gen, "simulate_job", lambda job, config: ran.append(job) or _fake_job(job, config))
+    crest = replace(band, out=tmp_path / "crest", strap_pins="crest", reuse=src)
+    summary = gen.generate(crest, progress=False)
+    held = {j.job_id for j in plan_jobs(crest) if gen.crest_pinned(j, "crest")}
+    assert len(held) == 4 and {j.job_id for j in ran} == held - {"train-00005"}  # job 5 is left out of the plan
+    copied = [e for e in source.entries() if e["job"] not in held]
+    assert summary["reused"] == {"sequences": len(copied), "rejections": 1}  # job 2's rejection
+    out = DatasetStore(tmp_path / "crest")
+    assert out.verify() == [] and {e["id"] for e in out.entries()} >= {e["id"] for e in copied}
+    assert [e for e in out.entries() if e["job"] not in held] == copied  # the same lines, files and hashes
+    assert out.entries("rejected.jsonl") == source.entries("rejected.jsonl")
+    # a second run copies nothing more; another vertex range would simulate (and plan) differently: nothing reused
+    assert gen.generate(crest, progress=False)["reused"] == {"sequences": 0, "rejections": 0}
+    other = replace(band, out=tmp_path / "other", max_vertices=900, reuse=src, limit=0)
+    assert gen.generate(other, progress=False)["reused"] == {"sequences": 0, "rejections": 0}
+    (src / out.entries()[0]["file"]).write_bytes(b"torn")
+    with pytest.raises(gen.StoreError, match="sha256"):
+        gen.generate(replace(crest, out=tmp_path / "again"), progress=False)
+    with pytest.raises(ValueError, match="is the --out folder itself"):
+        gen.generate(replace(crest, reuse=tmp_path / "crest"), progress=False)

@@ -21,6 +21,7 @@ failed write, a killed worker) is logged and retried on the next run.
 from __future__ import annotations
 
 import contextlib
+import hashlib
 import json
 import logging
 import math
@@ -37,7 +38,7 @@ from typing import Any
 import numpy as np
 
 from garsim.atomic import atomic_write_bytes
-from garsim.data.store import REJECTED, DatasetStore, GarmentLevel, SequenceRecord
+from garsim.data.store import MANIFEST, REJECTED, DatasetStore, GarmentLevel, SequenceRecord, StoreError
 
 log = logging.getLogger(__name__)
 
@@ -115,6 +116,9 @@ class GenerateConfig:
     # how parametric tops and dresses are held: "band" (their bodice's top ring; the straps slide) or "crest" (pins
     # where the straps cross the shoulders, skinned by the torso alone; docs/studies/anatomy.md)
     strap_pins: str = "band"
+    # a finished folder of the same plan: its jobs whose simulation these settings leave unchanged are copied, not
+    # simulated again (``job_settings``; e.g. every job but the parametric tops and dresses when only strap_pins differ)
+    reuse: Path | None = None
 
     def __post_init__(self) -> None:
         self.out = Path(self.out)
@@ -142,7 +146,7 @@ class GenerateConfig:
         from garsim.physics.newton_sim import SimConfig
 
         d = asdict(self)
-        for key in ("out", "num_train", "num_test", "num_ood", "workers", "shard", "limit", "paired_first"):
+        for key in ("out", "num_train", "num_test", "num_ood", "workers", "shard", "limit", "paired_first", "reuse"):
             d.pop(key)
         if d["strap_pins"] == STRAP_PINS[0]:  # added later: folders made before it still match
             d.pop("strap_pins")
@@ -324,6 +328,51 @@ def target_poses(job: JobSpec, body: Any) -> list[dict[str, np.ndarray]]:
 def crest_pinned(job: JobSpec, strap_pins: str) -> bool:
     """Whether the job's garment hangs on pins at its straps' crest (``GenerateConfig.strap_pins``)."""
     return strap_pins == "crest" and job.construction == "template" and job.family in STRAPPED_FAMILIES
+
+
+def job_settings(job: JobSpec, settings: dict[str, Any]) -> dict[str, Any]:
+    """The part of a folder's ``settings()`` that one job's simulation depends on: the strap pins only where they
+    hold the garment (``crest_pinned``); two folders agreeing on it store the same records for the job."""
+    d = {k: v for k, v in settings.items() if k != "strap_pins"}
+    d["crest_pinned"] = crest_pinned(job, settings.get("strap_pins", STRAP_PINS[0]))
+    return d
+
+
+def reuse_jobs(config: GenerateConfig, jobs: Sequence[JobSpec]) -> tuple[int, int]:
+    """Copy into ``config.out`` the finished ``jobs`` of ``config.reuse`` whose ``job_settings`` agree (stored
+    sequences checked against their sha256, rejections as they were) -> (sequences, rejections) copied."""
+    source = DatasetStore(config.reuse)
+    path = Path(config.reuse) / CONFIG_FILE
+    if not path.is_file():
+        raise ValueError(f"--reuse {config.reuse}: no {CONFIG_FILE} there (not a folder made by `garsim data generate`)")
+    if Path(config.reuse).resolve() == config.out.resolve():
+        raise ValueError(f"--reuse {config.reuse} is the --out folder itself: give another dataset folder")
+    theirs, mine = json.loads(path.read_text(encoding="utf-8")), config.settings()
+    found: dict[str, tuple[list[dict[str, Any]], list[dict[str, Any]]]] = {}
+    for name, slot in ((MANIFEST, 0), (REJECTED, 1)):
+        for e in source.entries(name):
+            found.setdefault(e.get("job", e["id"]), ([], []))[slot].append(e)
+    store = DatasetStore(config.out)
+    copied = [0, 0]
+    for job in jobs:
+        if job.job_id not in found or job_settings(job, theirs) != job_settings(job, mine):
+            continue
+        entries, rejections = found[job.job_id]
+        for e in entries:
+            data = (source.root / e["file"]).read_bytes()
+            if hashlib.sha256(data).hexdigest() != e["sha256"]:
+                raise StoreError(f"--reuse {source.root / e['file']} does not match its manifest sha256: run `garsim data verify`")
+            atomic_write_bytes(store.root / e["file"], data)
+            faces = store.root / "body_faces" / f"{e['body_faces']}.npy"
+            if not faces.exists():
+                atomic_write_bytes(faces, (source.root / "body_faces" / faces.name).read_bytes())
+        for e in entries:  # the manifest after every file it names
+            store.append_manifest(e)
+        for r in rejections:
+            store.append_manifest(r, REJECTED)
+        copied[0] += len(entries)
+        copied[1] += len(rejections)
+    return copied[0], copied[1]
 
 
 def build_garment(job: JobSpec, body: Any, strap_pins: str = STRAP_PINS[0]) -> Any:
@@ -611,6 +660,11 @@ def check_settings(config: GenerateConfig) -> None:
     atomic_write_bytes(path, json.dumps(mine, indent=2, sort_keys=True).encode())
 
 
+def _finished_jobs(store: DatasetStore) -> set[str]:
+    """Jobs with a stored sequence or a rejection (skipped when resuming)."""
+    return {e.get("job", e["id"]) for name in (MANIFEST, REJECTED) for e in store.entries(name)}
+
+
 def generate(config: GenerateConfig, progress: bool = True) -> dict[str, Any]:
     """Run (or resume) generation; returns counts, rejection reasons and timings of this run."""
     from tqdm import tqdm
@@ -626,7 +680,11 @@ def generate(config: GenerateConfig, progress: bool = True) -> dict[str, Any]:
     store = DatasetStore(config.out)
     jobs = plan_jobs(config)
     k, n = config.shard
-    done = {e.get("job", e["id"]) for e in store.entries()} | {e.get("job", e["id"]) for e in store.entries(REJECTED)}
+    reused = (0, 0)
+    if config.reuse is not None:
+        done = _finished_jobs(store)
+        reused = reuse_jobs(config, [j for j in jobs if j.index % n == k and j.job_id not in done])
+    done = _finished_jobs(store)
     pending = [j for j in jobs if j.index % n == k and j.job_id not in done]
     # interleave the splits so that a partial run (or a stopped one) holds every split in proportion
     rank = {j.job_id: r for split in SPLITS for r, j in enumerate(x for x in jobs if x.split == split)}
@@ -640,6 +698,7 @@ def generate(config: GenerateConfig, progress: bool = True) -> dict[str, Any]:
         "stored": 0,
         "rejected": {},
         "errors": 0,
+        "reused": {"sequences": reused[0], "rejections": reused[1]},
         "seconds": [],
     }
     if not pending:
