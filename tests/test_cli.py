@@ -1,4 +1,6 @@
 import json
+from dataclasses import replace
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -104,10 +106,11 @@ def test_data_generate_passes_its_settings(tmp_path, monkeypatch, capsys):
     monkeypatch.setattr(gen, "generate", lambda cfg, progress: seen.append(cfg) or {"seconds": []})
     out = str(tmp_path / "d")
     assert main(["data", "generate", "--out", out, "--train", "3", "--shard", "1/2", "--no-graphs", "--quiet"]) == 0
-    assert main(["data", "generate", "--out", out, "--quiet"]) == 0
+    assert main(["data", "generate", "--out", out, "--quiet", "--strap-pins", "crest", "--reuse", "v4"]) == 0
     (a, b) = seen
     assert (a.num_train, a.shard, a.sim) == (3, (1, 2), {"graphs": False}) and b.sim == {}
-    assert b.num_train == gen.GenerateConfig.num_train and a.settings() == b.settings()
+    assert (a.strap_pins, a.reuse, b.strap_pins, b.reuse) == ("band", None, "crest", Path("v4"))
+    assert b.num_train == gen.GenerateConfig.num_train and a.settings() == replace(b, strap_pins="band").settings()
     assert '"seconds"' not in capsys.readouterr().out
 
 

@@ -407,5 +407,8 @@ def test_reuse_copies_the_jobs_other_strap_pins_leave_unchanged(tmp_path, monkey
     (src / out.entries()[0]["file"]).write_bytes(b"torn")
     with pytest.raises(gen.StoreError, match="sha256"):
         gen.generate(replace(crest, out=tmp_path / "again"), progress=False)
+    (src / out.entries()[0]["file"]).unlink()
+    with pytest.raises(gen.StoreError, match="No such file"):
+        gen.generate(replace(crest, out=tmp_path / "again"), progress=False)
     with pytest.raises(ValueError, match="is the --out folder itself"):
         gen.generate(replace(crest, reuse=tmp_path / "crest"), progress=False)

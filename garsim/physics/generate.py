@@ -344,7 +344,9 @@ def reuse_jobs(config: GenerateConfig, jobs: Sequence[JobSpec]) -> tuple[int, in
     source = DatasetStore(config.reuse)
     path = Path(config.reuse) / CONFIG_FILE
     if not path.is_file():
-        raise ValueError(f"--reuse {config.reuse}: no {CONFIG_FILE} there (not a folder made by `garsim data generate`)")
+        raise ValueError(
+            f"--reuse {config.reuse}: no {CONFIG_FILE} there (not a folder made by `garsim data generate`)"
+        )
     if Path(config.reuse).resolve() == config.out.resolve():
         raise ValueError(f"--reuse {config.reuse} is the --out folder itself: give another dataset folder")
     theirs, mine = json.loads(path.read_text(encoding="utf-8")), config.settings()
@@ -359,9 +361,16 @@ def reuse_jobs(config: GenerateConfig, jobs: Sequence[JobSpec]) -> tuple[int, in
             continue
         entries, rejections = found[job.job_id]
         for e in entries:
-            data = (source.root / e["file"]).read_bytes()
+            try:
+                data = (source.root / e["file"]).read_bytes()
+            except OSError as exc:
+                raise StoreError(
+                    f"--reuse {source.root / e['file']}: {exc.strerror}; run `garsim data verify`"
+                ) from None
             if hashlib.sha256(data).hexdigest() != e["sha256"]:
-                raise StoreError(f"--reuse {source.root / e['file']} does not match its manifest sha256: run `garsim data verify`")
+                raise StoreError(
+                    f"--reuse {source.root / e['file']} does not match its manifest sha256: run `garsim data verify`"
+                )
             atomic_write_bytes(store.root / e["file"], data)
             faces = store.root / "body_faces" / f"{e['body_faces']}.npy"
             if not faces.exists():
