@@ -319,3 +319,28 @@ def test_driver_anatomy(driver, driver_args):
     assert driver.main(["anatomy", *args, "--model", str(WEIGHTS), "--external-data", str(folder / "none")]) == 0
     text = (folder / "anatomy.md").read_text()
     assert "| all |" in text and "tangential" in text and "The external set" not in text
+
+
+def test_prior_bands_groups_the_priors_error_by_family_construction_and_pose():
+    """examples/prior_bands.py: every sample counted once per group, the overall error the mean prior error."""
+    spec = importlib.util.spec_from_file_location(
+        "prior_bands", Path(__file__).parents[1] / "examples" / "prior_bands.py"
+    )
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    samples = DatasetStore(FIXTURE).samples("test")
+    families = tuple(sorted({s.garment_type for s in samples}))
+    result = module.prior_bands(FIXTURE, "test", families)
+    alls = {k: r for k, r in result.items() if k.endswith("/all")}
+    assert sum(r["samples"] for r in alls.values()) == len(samples)
+    assert sum(r["samples"] for k, r in result.items() if not k.endswith("/all")) == len(samples)
+    for key, r in alls.items():
+        family, construction, _ = key.split("/")
+        errs = [
+            1000 * np.linalg.norm(s.target - s.prior, axis=1).mean()
+            for s in samples
+            if s.garment_type == family and s.meta["construction"] == construction
+        ]
+        assert r["prior_mm"] == pytest.approx(np.mean(errs), abs=0.06)  # rounded to 0.1 mm
+    with pytest.raises(ValueError, match="no 'ood' samples of shirt"):
+        module.prior_bands(FIXTURE, "ood", ("shirt",))
