@@ -342,12 +342,12 @@ def reuse_jobs(config: GenerateConfig, jobs: Sequence[JobSpec]) -> tuple[int, in
     """Copy into ``config.out`` the finished ``jobs`` of ``config.reuse`` whose ``job_settings`` agree (stored
     sequences checked against their sha256, rejections as they were) -> (sequences, rejections) copied."""
     source = DatasetStore(config.reuse)
-    path = Path(config.reuse) / CONFIG_FILE
+    path = source.root / CONFIG_FILE
     if not path.is_file():
         raise ValueError(
             f"--reuse {config.reuse}: no {CONFIG_FILE} there (not a folder made by `garsim data generate`)"
         )
-    if Path(config.reuse).resolve() == config.out.resolve():
+    if source.root.resolve() == config.out.resolve():
         raise ValueError(f"--reuse {config.reuse} is the --out folder itself: give another dataset folder")
     theirs, mine = json.loads(path.read_text(encoding="utf-8")), config.settings()
     found: dict[str, tuple[list[dict[str, Any]], list[dict[str, Any]]]] = {}
@@ -689,11 +689,10 @@ def generate(config: GenerateConfig, progress: bool = True) -> dict[str, Any]:
     store = DatasetStore(config.out)
     jobs = plan_jobs(config)
     k, n = config.shard
-    reused = (0, 0)
+    done, reused = _finished_jobs(store), (0, 0)
     if config.reuse is not None:
-        done = _finished_jobs(store)
         reused = reuse_jobs(config, [j for j in jobs if j.index % n == k and j.job_id not in done])
-    done = _finished_jobs(store)
+        done = _finished_jobs(store)
     pending = [j for j in jobs if j.index % n == k and j.job_id not in done]
     # interleave the splits so that a partial run (or a stopped one) holds every split in proportion
     rank = {j.job_id: r for split in SPLITS for r, j in enumerate(x for x in jobs if x.split == split)}
