@@ -5,7 +5,8 @@ generator's own ``simulate_job`` in three pin set-ups: the band pins; no pins at
 by contact and friction); pins where the straps cross the shoulders, skinned by the torso alone (``crest``). Per run:
 accepted or the rejection, and per settled target the mean error of the skinning prior against the simulation (mm)
 overall and in the template's top height quartile (straps and neckline), the bodice's mean drop below the prior (mm)
-and the CPU seconds.
+and the CPU seconds. ``--families tshirt`` tries the crest pins on the parametric t-shirts too (pinned across the
+middle of their shoulder panels, ``_strap_pins``, and skinned by every bone in the generator).
 
     .venv/bin/python examples/strap_support.py --json docs/studies/anatomy/strap_support.json   # ~10 CPU minutes
 """
@@ -54,6 +55,8 @@ def run(job: JobSpec, config: GenerateConfig, variant: str) -> dict:
     t = time.process_time()
     free = variant == "none"
     patch = mock.patch.object(generate, "build_garment", unpinned(generate.build_garment)) if free else None
+    if variant == "crest" and job.family not in generate.STRAPPED_FAMILIES:  # crest pins tried on another family
+        patch = mock.patch.object(generate, "STRAPPED_FAMILIES", generate.STRAPPED_FAMILIES | {job.family})
     try:
         if patch:
             patch.start()
@@ -90,7 +93,7 @@ def main() -> None:
     parser.add_argument("--per-family", type=int, default=3)
     parser.add_argument("--variants", nargs="+", choices=VARIANTS, default=list(VARIANTS))
     parser.add_argument("--max-vertices", type=int, default=900, help="skip larger garments (cheaper runs)")
-    parser.add_argument("--families", nargs="+", choices=("top", "dress"), default=["top", "dress"])
+    parser.add_argument("--families", nargs="+", choices=("top", "dress", "tshirt"), default=["top", "dress"])
     parser.add_argument("--train-jobs", type=int, default=600, help="training jobs of the plan drawn from")
     parser.add_argument("--skip", type=int, default=0, help="leave out the first N jobs of each family (resume)")
     args = parser.parse_args()
