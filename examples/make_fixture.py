@@ -1,10 +1,11 @@
-"""Export the committed test fixture (a few MB) from generated datasets (v4 for training, v4test for testing):
+"""Export the committed test fixture (a few MB) from generated datasets (v5 for training, v5test for testing):
 from the test store one low-resolution record per garment family and construction, every canonical pose and
 fabric, and one complete paired-fabric group;
 from the training store one record of each of four families (skirt, t-shirt, trousers, dress: a few training jobs
-for the trainer's and the studies' tests, no top so that a family stays unseen); last settled state of each.
+for the trainer's and the studies' tests, no top so that a family stays unseen); last settled state of each, with its
+manifest description (construction, canonical pose, paired, phenotype).
 
-Run: .venv/bin/python examples/make_fixture.py --data ~/garsim-data/v4test --train-data ~/garsim-data/v4
+Run: .venv/bin/python examples/make_fixture.py --data ~/garsim-data/v5test --train-data ~/garsim-data/v5
      [--out tests/fixtures/dataset_v2]
 """
 
@@ -39,10 +40,11 @@ def test_ids(store: DatasetStore) -> list[str]:
 
 
 def train_ids(store: DatasetStore) -> list[str]:
-    """The first unpaired training record of each of ``TRAIN_FAMILIES``."""
+    """The first training record of each of ``TRAIN_FAMILIES``, unpaired where the family has one (a folder made
+    with ``--paired-first`` may hold only paired groups of a family so far: then one copy of the first)."""
     chosen: dict[str, str] = {}
-    for e in sorted(store.entries(), key=lambda e: e["id"]):
-        if e["split"] == "train" and not e.get("paired") and e["garment_type"] in TRAIN_FAMILIES:
+    for e in sorted(store.entries(), key=lambda e: (bool(e.get("paired")), e["id"])):
+        if e["split"] == "train" and e["garment_type"] in TRAIN_FAMILIES:
             chosen.setdefault(e["garment_type"], e["id"])
     return sorted(chosen.values())
 

@@ -71,9 +71,15 @@ def test_verify_on_non_dataset(tmp_path):
 def test_export_subset(tmp_path):
     src = DatasetStore(tmp_path / "src")
     for i in range(3):
-        src.append_manifest(src.write_sequence(make_record(f"s{i}", seed=i, k=4)))
+        rec = make_record(f"s{i}", seed=i, k=4)
+        rec.meta["settled"] = [False, False, False, True]  # as the generator stores them, with their description
+        src.append_manifest({**src.write_sequence(rec), "construction": "implicit", "num_settled": 1, "paired": True, "job": "j"})
     sub = src.export_subset(tmp_path / "sub", ["s2", "s0"], frames=2, resolutions=("low",))
     recs = list(sub.sequences())
+    entry = sub.entries()[0]
+    assert entry["construction"] == "implicit" and entry["paired"] and entry["num_frames"] == 2
+    assert entry["num_settled"] == 1 and recs[0].meta["settled"] == [False, True]
+    assert sub.info()["samples_by"]["construction=implicit"] == 4
     assert [r.seq_id for r in recs] == ["s2", "s0"] and set(recs[0].levels) == {"low"}
     full = next(r for r in src.sequences() if r.seq_id == "s2")
     np.testing.assert_array_equal(recs[0].levels["low"].targets, full.levels["low"].targets[-2:])

@@ -48,5 +48,5 @@ def test_fixture_holds_a_paired_group_ordered_like_real_fabrics():
 def test_info_reads_a_store_with_only_the_low_level():
     """The fixture keeps the decimated level only: ``data info`` reports its vertex range from it."""
     info = DatasetStore(FIXTURE).info()
-    assert info["settled_samples"] == 18
+    assert info["settled_samples"] == 21
     assert 100 < info["vertices"]["min"] <= info["vertices"]["max"] < 1000

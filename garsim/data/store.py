@@ -261,7 +261,8 @@ class DatasetStore:
         resolutions: tuple[str, ...] = RESOLUTIONS,
     ) -> DatasetStore:
         """Copy sequences ``ids`` into a new store, keeping the last ``frames`` frames and the given resolutions
-        (e.g. a small committed test fixture)."""
+        (e.g. a small committed test fixture); the manifest keeps each entry's description (construction, canonical
+        pose, paired, phenotype, ...) with the settled count of the frames kept."""
         out = DatasetStore(dst)
         done = out.done_ids()
         by_id = {e["id"]: e for e in self.entries()}
@@ -274,12 +275,18 @@ class DatasetStore:
             rec = self.read_sequence(by_id[seq_id])
             keep = slice(-frames, None) if frames else slice(None)
             rec.body_targets, rec.frames = rec.body_targets[keep], rec.frames[keep]
+            if "settled" in rec.meta:  # per-frame flags (generated data)
+                rec.meta = {**rec.meta, "settled": rec.meta["settled"][keep]}
             rec.levels = {
                 r: GarmentLevel(lv.template, lv.faces, lv.pinned, lv.priors[keep], lv.targets[keep])
                 for r, lv in rec.levels.items()
                 if r in resolutions
             }
-            out.append_manifest(out.write_sequence(rec))
+            entry = out.write_sequence(rec)
+            described = {k: v for k, v in by_id[seq_id].items() if k not in entry}
+            if "num_settled" in described:
+                described["num_settled"] = int(sum(rec.meta.get("settled", [True] * len(rec.frames))))
+            out.append_manifest({**described, **entry})
         return out
 
     # -- inspection ----------------------------------------------------------------------
