@@ -73,7 +73,8 @@ def test_export_subset(tmp_path):
     for i in range(3):
         rec = make_record(f"s{i}", seed=i, k=4)
         rec.meta["settled"] = [False, False, False, True]  # as the generator stores them, with their description
-        src.append_manifest({**src.write_sequence(rec), "construction": "implicit", "num_settled": 1, "paired": True, "job": "j"})
+        described = {"construction": "implicit", "num_settled": 1, "paired": True, "job": "j"}
+        src.append_manifest({**src.write_sequence(rec), **described})
     sub = src.export_subset(tmp_path / "sub", ["s2", "s0"], frames=2, resolutions=("low",))
     recs = list(sub.sequences())
     entry = sub.entries()[0]
