@@ -625,9 +625,17 @@ def cmd_eval(args: argparse.Namespace) -> int:
     if args.out:
         _check_output(args.out, (".json",), "--out")
     from garsim.api import GarSim
-    from garsim.eval.experiments import evaluate_split, format_table, paired_fabric_agreement
+    from garsim.eval.experiments import (
+        compare_models,
+        evaluate_split,
+        format_comparison,
+        format_table,
+        paired_fabric_agreement,
+    )
     from garsim.model.baselines import load_model
 
+    if args.compare and not (Path(args.compare) / "config.json").is_file():
+        raise ValueError(f"--compare {args.compare}: not a model folder (a folder with config.json)")
     model = load_model(args.model) if args.model else GarSim.default().model
     report: dict = {"model": args.model or "shipped", "resolution": args.resolution, "by": args.by}
     name = model.kind if model is not None else "garsim"
@@ -636,6 +644,12 @@ def cmd_eval(args: argparse.Namespace) -> int:
             model, args.data, split, args.resolution, refine=args.refine, name=name, by=args.by
         )
         print(f"## {split} split ({args.resolution} resolution)\n{format_table(report[split])}\n")
+        if args.compare:
+            other = load_model(args.compare)
+            table = compare_models(model, other, args.data, split, args.resolution, by=args.by)
+            report.setdefault("compare", {"other": args.compare})[split] = table
+            names = ("model", "other") if args.model else ("shipped", "other")
+            print(f"## {split} split: raw error against {args.compare}\n{format_comparison(table, *names)}\n")
     if model is not None:
         fab = paired_fabric_agreement(model, args.data, resolution=args.resolution)
         report["paired_fabrics"] = fab
@@ -1033,6 +1047,12 @@ def build_parser() -> argparse.ArgumentParser:
         metavar="KEY",
         help=f"group the rows by these ({', '.join(GROUP_CHOICES)}, or two crossed as a/b, e.g. family/construction; "
         "each a set of rows beside 'all'; default: the garment family)",
+    )
+    p.add_argument(
+        "--compare",
+        metavar="MODEL",
+        help="also score this model folder's raw network on the same samples: per group the mean difference with a "
+        "95%% bootstrap interval over garment instances (is a difference more than noise?)",
     )
     p.add_argument("--out", help="write the results to this .json file")
     p.set_defaults(func=cmd_eval)

@@ -789,3 +789,23 @@ def test_eval_by_takes_keys_and_crossed_keys_and_refuses_others(capsys):
     with pytest.raises(SystemExit) as exc:
         build_parser().parse_args(["eval", "--data", "d", "--by", "family/colour"])
     assert exc.value.code == 2 and "cannot group by ['colour']" in capsys.readouterr().err
+
+
+def test_eval_compare_scores_a_second_model_on_the_same_samples(tmp_path, capsys):
+    """The shipped model against itself: no difference on any group, and the table is in the JSON; a --compare that
+    is not a model folder is refused before anything runs."""
+    from pathlib import Path
+
+    from garsim.api import WEIGHTS_DIR
+
+    fixture = str(Path(__file__).parent / "fixtures" / "dataset_v2")
+    out = tmp_path / "r.json"
+    argv = ["eval", "--data", fixture, "--splits", "ood", "--compare", str(WEIGHTS_DIR), "--out", str(out)]
+    assert main(argv) == 0
+    table = json.loads(out.read_text())["compare"]["ood"]
+    assert table["all"]["frames"] == 4  # the runtime and torch forwards agree to well under a micrometre
+    assert table["all"]["diff_mm"] == pytest.approx(0.0, abs=1e-3) and abs(table["trousers"]["diff_high_mm"]) < 1e-3
+    assert "raw error against" in capsys.readouterr().out
+    assert main(["eval", "--data", fixture, "--compare", str(tmp_path)]) == 2
+    line = _one_error_line(capsys)
+    assert "--compare" in line and "not a model folder" in line

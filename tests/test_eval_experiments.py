@@ -199,3 +199,33 @@ def test_paired_fabric_agreement_of_an_oracle_and_of_a_reversed_model(tmp_path):
     assert fabric_deviation(Reversed(), paired_groups(tmp_path))["residual_deviation_mm"] == pytest.approx(
         20.0, abs=1e-3
     )
+
+
+def test_cluster_bootstrap_resamples_whole_clusters():
+    from garsim.eval.experiments import cluster_bootstrap
+
+    # one cluster's samples always move together: every resample of {a, a, b} by cluster is a mix of a=1, b=4
+    mean, low, high = cluster_bootstrap(np.array([1.0, 1.0, 4.0]), ["a", "a", "b"], resamples=500)
+    assert mean == pytest.approx(2.0)  # the per-sample mean, not the per-cluster one (2.5)
+    assert low == pytest.approx(1.0) and high == pytest.approx(4.0)  # all-a and all-b resamples occur
+    mean, low, high = cluster_bootstrap(np.full(6, -0.5), list("aabbcc"))
+    assert (mean, low, high) == pytest.approx((-0.5, -0.5, -0.5))  # no spread, no interval
+
+
+def test_compare_models_gives_the_difference_per_group(tmp_path):
+    """On the sphere store (prior 10 mm from the truth): a model that is the truth is 10 mm better than the prior on
+    every sample, and the interval is that exactly."""
+    from garsim.eval.experiments import compare_models, format_comparison
+
+    class Truth:
+        def predict(self, samples):
+            return [s.target for s in samples]
+
+    table = compare_models(Truth(), None, _store(tmp_path), "test")
+    assert list(table) == ["all", "skirt", "top"] and table["all"]["frames"] == 4
+    row = table["skirt"]
+    assert row["model_mm"] == 0.0 and row["other_mm"] == pytest.approx(10.0, abs=0.01)
+    assert (row["diff_mm"], row["diff_low_mm"], row["diff_high_mm"]) == pytest.approx((-10.0,) * 3, abs=0.01)
+    assert row["better_share"] == 1.0
+    text = format_comparison(table, "truth", "prior")
+    assert "| skirt | 2 | 0.00 | 10.00 | -10.00 | [-10.00, -10.00] | 100% |" in text

@@ -16,7 +16,7 @@ import numpy as np
 from garsim.api import postprocess
 from garsim.data.sample import CUSTOM_FABRIC, FABRICS, Sample
 from garsim.data.store import DatasetStore
-from garsim.eval.metrics import correction_alignment, garment_metrics, jitter_mm
+from garsim.eval.metrics import correction_alignment, euclidean_error_mm, garment_metrics, jitter_mm
 from garsim.garments.fabrics import interpolate_fabric
 from garsim.geometry.proximity import nearest_vertices
 from garsim.model.baselines import nearest_vertex_drape
@@ -164,6 +164,77 @@ def score_predictions(
         for kind, values in jitter.items():
             results[method][kind].update(jitter_mm=float(np.mean(values)), sequences=len(values))
     return results
+
+
+def cluster_bootstrap(
+    diff: np.ndarray, clusters: Sequence[str], resamples: int = 2000, seed: int = 0, level: float = 0.95
+) -> tuple[float, float, float]:
+    """(mean, low, high): the mean of per-sample ``diff`` and its ``level`` percentile interval when whole clusters
+    are resampled with replacement (samples of one cluster, e.g. a paired group's fabrics, are not independent)."""
+    names, idx = np.unique(np.asarray(clusters), return_inverse=True)
+    sums = np.bincount(idx, weights=np.asarray(diff, dtype=np.float64), minlength=len(names))
+    counts = np.bincount(idx, minlength=len(names)).astype(np.float64)
+    draw = np.random.default_rng(seed).integers(0, len(names), size=(resamples, len(names)))
+    means = sums[draw].sum(axis=1) / counts[draw].sum(axis=1)
+    tail = 50.0 * (1.0 - level)
+    low, high = np.percentile(means, [tail, 100.0 - tail])
+    return float(sums.sum() / counts.sum()), float(low), float(high)
+
+
+def compare_models(
+    model: Any,
+    other: Any,
+    data_dir: str | os.PathLike,
+    split: str = "test",
+    resolution: str = "low",
+    by: Sequence[str] = ("family",),
+    resamples: int = 2000,
+) -> dict[str, dict[str, float]]:
+    """Two models' raw errors on the same samples, per group ('all' first): their means (mm), the mean difference
+    ``model - other`` with its 95% bootstrap interval over garment instances (``cluster_bootstrap`` by job), and the
+    share of samples on which ``model`` is closer to the simulation. An interval that excludes 0 is a difference
+    these samples resolve; one that spans it is not."""
+    samples = DatasetStore(data_dir).samples(split, resolution)
+    if not samples:
+        raise ValueError(f"{data_dir}: no {split!r} samples to evaluate")
+    errors = [
+        np.array([euclidean_error_mm(p, s.target) for p, s in zip(_predict_all(m, samples), samples)])
+        for m in (model, other)
+    ]
+    diff = errors[0] - errors[1]
+    jobs = np.array([str(s.meta.get("job", s.meta["seq_id"])) for s in samples])
+    members: dict[str, list[int]] = defaultdict(list)
+    for i, s in enumerate(samples):
+        for group in ["all", *sample_groups(s, by)]:
+            members[group].append(i)
+    out = {}
+    for group in ["all", *sorted(g for g in members if g != "all")]:
+        i = np.asarray(members[group])
+        mean, low, high = cluster_bootstrap(diff[i], jobs[i], resamples)
+        out[group] = {
+            "frames": len(i),
+            "model_mm": float(errors[0][i].mean()),
+            "other_mm": float(errors[1][i].mean()),
+            "diff_mm": mean,
+            "diff_low_mm": low,
+            "diff_high_mm": high,
+            "better_share": float((diff[i] < 0).mean()),
+        }
+    return out
+
+
+def format_comparison(table: dict[str, dict[str, float]], model: str, other: str) -> str:
+    """A Markdown table of ``compare_models``."""
+    lines = [
+        f"| group | frames | {model} (mm) | {other} (mm) | difference (mm) | 95% interval | {model} closer |",
+        "|---|---|---|---|---|---|---|",
+    ]
+    for group, r in table.items():
+        lines.append(
+            f"| {group} | {r['frames']} | {r['model_mm']:.2f} | {r['other_mm']:.2f} | {r['diff_mm']:+.2f} | "
+            f"[{r['diff_low_mm']:+.2f}, {r['diff_high_mm']:+.2f}] | {100 * r['better_share']:.0f}% |"
+        )
+    return "\n".join(lines)
 
 
 def _distance_and_fold(samples: list[Sample], verts: list[np.ndarray]) -> tuple[list[float], list[float]]:
