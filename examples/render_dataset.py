@@ -4,7 +4,7 @@ One settled sample per garment family and construction, the template on its cano
 canonical pose (T, A, in between), one sample per fabric (presets and physical values), and one paired
 group side by side (one template, four fabrics, same body and pose).
 
-Run: .venv/bin/python examples/render_dataset.py --data ~/garsim-data/v4 [--out docs/dataset_samples.png]
+Run: .venv/bin/python examples/render_dataset.py --data ~/garsim-data/v5 [--out docs/dataset_samples.png]
 """
 
 from __future__ import annotations
