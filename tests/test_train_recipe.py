@@ -1,0 +1,33 @@
+"""``examples/train_v1.sh``, the documented training recipe, runs its stages end to end on the fixture."""
+
+import json
+import os
+import subprocess
+from pathlib import Path
+
+import pytest
+
+from garsim.model.garsim import GarSimModel
+
+ROOT = Path(__file__).parents[1]
+
+
+@pytest.mark.slow
+def test_recipe_runs_every_stage_and_averages_the_fine_tunes(tmp_path):
+    env = {
+        **os.environ,
+        "DATA": str(ROOT / "tests" / "fixtures" / "dataset_v2"),
+        "OUT": str(tmp_path),
+        **dict(PROCS="1", BATCH="2", STAGE1_EPOCHS="1", FINETUNE_EPOCHS="1", FABRIC_EPOCHS="1", STAGE2_EPOCHS="0"),
+        **dict(SOUP="1", PAIR="1"),
+    }
+    r = subprocess.run(["bash", "examples/train_v1.sh"], cwd=ROOT, env=env, capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr[-2000:]
+    model = Path(r.stdout.strip().splitlines()[-1])
+    assert model == tmp_path / "fabric" / "soup"  # the last stage's average, printed for shipping
+    assert json.loads((tmp_path / "fabric" / "train_config.json").read_text())["losses"]["fold"] == 0.3
+    fine, fabric, soup = (
+        GarSimModel.load(p).state_dict() for p in (tmp_path / "finetune" / "soup", tmp_path / "fabric" / "best", model)
+    )
+    key = next(iter(soup))
+    assert (soup[key] - 0.5 * (fine[key] + fabric[key])).abs().max() < 1e-6  # averaged with the stage's start
