@@ -637,6 +637,7 @@ def cmd_eval(args: argparse.Namespace) -> int:
     if args.compare and not (Path(args.compare) / "config.json").is_file():
         raise ValueError(f"--compare {args.compare}: not a model folder (a folder with config.json)")
     model = load_model(args.model) if args.model else GarSim.default().model
+    other = load_model(args.compare) if args.compare else None
     report: dict = {"model": args.model or "shipped", "resolution": args.resolution, "by": args.by}
     name = model.kind if model is not None else "garsim"
     for split in args.splits:
@@ -645,7 +646,6 @@ def cmd_eval(args: argparse.Namespace) -> int:
         )
         print(f"## {split} split ({args.resolution} resolution)\n{format_table(report[split])}\n")
         if args.compare:
-            other = load_model(args.compare)
             table = compare_models(model, other, args.data, split, args.resolution, by=args.by)
             report.setdefault("compare", {"other": args.compare})[split] = table
             names = ("model", "other") if args.model else ("shipped", "other")
