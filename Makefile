@@ -31,9 +31,9 @@ test-all: $(STAMP)
 
 # The results report (docs/results.md and its figures) from the dataset, the model and its training run (when
 # RUN exists; otherwise docs/training_curve.png is kept):
-#   make results DATA=~/garsim-data/v4test RUN=~/garsim-runs/v1 MODEL=garsim/weights
-# (DATA: `garsim data generate --out ~/garsim-data/v4test --seed 0 --train 0 --test 250 --ood 64`)
-DATA ?= $(HOME)/garsim-data/v4test
+#   make results DATA=~/garsim-data/v5test RUN=~/garsim-runs/v1 MODEL=garsim/weights
+# (DATA: `garsim data generate --out ~/garsim-data/v5test --seed 0 --train 0 --test 260 --ood 64 --strap-pins crest`)
+DATA ?= $(HOME)/garsim-data/v5test
 RUN ?= $(HOME)/garsim-runs/v1
 MODEL ?= garsim/weights
 EXTERNAL := ../shared/external-eval/check.py
