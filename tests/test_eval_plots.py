@@ -29,3 +29,21 @@ def test_paired_fabrics_png(tmp_path):
     fab = {"groups": 1, "ordering_agreement": 1.0, "spread_ratio": 0.3, "rows": [row]}
     png = plot_paired_fabrics(fab, tmp_path / "f.png")
     assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and png.stat().st_size > 5000
+
+
+def test_paired_fabrics_legend_has_one_entry_per_family(tmp_path, monkeypatch):
+    from garsim.eval import plots
+
+    figures = []
+    make = plots._figure
+    monkeypatch.setattr(plots, "_figure", lambda: figures.append(make()) or figures[-1])
+    rows = [
+        {"garment": g, "sim_distance_mm": [10, 12, 15, 20], "pred_distance_mm": [11, 12, 13, 14]}
+        | {"sim_fold_deg": [30, 28, 25, 20], "pred_fold_deg": [29, 28, 27, 26]}
+        for g in ["skirt", "top"] * 6
+    ]
+    plot_paired_fabrics(
+        {"groups": 12, "ordering_agreement": 1.0, "spread_ratio": 0.3, "rows": rows}, tmp_path / "f.png"
+    )
+    legend = figures[0].axes[0].get_legend()
+    assert [t.get_text() for t in legend.get_texts()] == ["skirt", "top"]

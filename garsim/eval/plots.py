@@ -71,19 +71,23 @@ def plot_bars(values: dict[str, dict[str, float]], ylabel: str, title: str, out_
 def plot_paired_fabrics(fab: dict, out_png: str | os.PathLike) -> Path:
     """Fig. 7 analog from ``paired_fabric_agreement``: per paired group, the simulated (solid) and predicted
     (dashed, the midway physical fabrics as open circles) mean distance to the body and fold angle, silk to
-    leather, each drawn as the change from its own silk value so that groups of different garments share an axis."""
+    leather, each drawn as the change from its own silk value so that groups of different garments share an axis;
+    one colour per garment family (one legend entry each, however many groups)."""
     from garsim.data.sample import FABRICS
 
     fig = _figure()
     axes = fig.subplots(1, 2)
     x = list(range(len(FABRICS)))
     mid_x = [i + 0.5 for i in x[:-1]]
-    colors = [f"C{k % 10}" for k in range(len(fab["rows"]))]
+    families = sorted({row["garment"] for row in fab["rows"]})
+    colors = [f"C{families.index(row['garment']) % 10}" for row in fab["rows"]]
+    first = {row["garment"]: i for i, row in reversed(list(enumerate(fab["rows"])))}  # each family's first row
     panels = (("distance_mm", "mm", "distance to the body"), ("fold_deg", "deg", "mean fold angle"))
     for ax, (key, unit, what) in zip(axes, panels):
-        for row, color in zip(fab["rows"], colors):
+        for i, (row, color) in enumerate(zip(fab["rows"], colors)):
             sim, pred = row[f"sim_{key}"], row[f"pred_{key}"]
-            ax.plot(x, [v - sim[0] for v in sim], color=color, marker="o", ms=3, label=row["garment"])
+            label = row["garment"] if first[row["garment"]] == i else "_nolegend_"
+            ax.plot(x, [v - sim[0] for v in sim], color=color, marker="o", ms=3, label=label)
             ax.plot(x, [v - pred[0] for v in pred], color=color, ls="--", marker="o", ms=3)
             if f"midway_{key}" in row:
                 ax.plot(
