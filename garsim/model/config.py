@@ -69,7 +69,7 @@ class GarSimConfig:
     magnitude_bias_init: float = -3.0
     # fabric conditioning (a deviation: the paper concatenates a one-hot f to the node input only)
     fabric_film: bool = True  # the fabric's physical values also scale/shift every edge update (FiLM) and the magnitude
-    # ... and the processed node latents before the decoder (FiLM that no LayerNorm follows; off in v0.7)
+    # ... and the processed node latents before the decoder (FiLM that no LayerNorm follows; off in the shipped model)
     fabric_decoder_film: bool = False
     # global context (a deviation: the paper's processor passes messages along mesh edges only, so after L steps a
     # vertex knows the garment within L edges; a top's hem cannot see the shoulders that lift it). Before each step

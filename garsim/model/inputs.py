@@ -12,7 +12,8 @@ the body geometry "at q_i" = Σ w_ij X^body_j (the geometry encoder's output on 
 body-semantic input splats max_i w_ij per body vertex. Fabric: physical values (log bending rigidity,
 areal density and stretch, scaled so silk = 0 and leather = 1), not a one-hot. Per directed mesh
 edge (i -> j): E_ij = G_j − G_i and E^prior_ij. Faces and face pairs for the losses. With ``target_surface``
-(off in the paper and in v0.7) also the prior's soft anchor on the target body: offset, normal, signed distance.
+(off in the paper and in the shipped model) the prior's soft anchor on the target body: offset, normal, signed
+distance.
 Everything about the canonical body alone (KD-tree, yaw frame, rings) is computed once per body and cached by content.
 
 Frame: all vectors are expressed in a body frame (rotation ``rot``, world -> frame) whose
