@@ -634,10 +634,13 @@ def cmd_eval(args: argparse.Namespace) -> int:
     )
     from garsim.model.baselines import load_model
 
-    if args.compare and not (Path(args.compare) / "config.json").is_file():
-        raise ValueError(f"--compare {args.compare}: not a model folder (a folder with config.json)")
+    other = None
+    if args.compare:  # loaded first: a wrong folder fails before any scoring
+        try:
+            other = load_model(args.compare)
+        except (ValueError, OSError) as exc:
+            raise ValueError(f"--compare {args.compare}: not a model folder ({exc})") from None
     model = load_model(args.model) if args.model else GarSim.default().model
-    other = load_model(args.compare) if args.compare else None
     report: dict = {"model": args.model or "shipped", "resolution": args.resolution, "by": args.by}
     name = model.kind if model is not None else "garsim"
     for split in args.splits:

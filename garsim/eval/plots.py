@@ -81,12 +81,13 @@ def plot_paired_fabrics(fab: dict, out_png: str | os.PathLike) -> Path:
     mid_x = [i + 0.5 for i in x[:-1]]
     families = sorted({row["garment"] for row in fab["rows"]})
     colors = [f"C{families.index(row['garment']) % 10}" for row in fab["rows"]]
-    first = {row["garment"]: i for i, row in reversed(list(enumerate(fab["rows"])))}  # each family's first row
     panels = (("distance_mm", "mm", "distance to the body"), ("fold_deg", "deg", "mean fold angle"))
     for ax, (key, unit, what) in zip(axes, panels):
-        for i, (row, color) in enumerate(zip(fab["rows"], colors)):
+        labelled: set[str] = set()  # a legend entry for each family's first group only
+        for row, color in zip(fab["rows"], colors):
             sim, pred = row[f"sim_{key}"], row[f"pred_{key}"]
-            label = row["garment"] if first[row["garment"]] == i else "_nolegend_"
+            label = "_nolegend_" if row["garment"] in labelled else row["garment"]
+            labelled.add(row["garment"])
             ax.plot(x, [v - sim[0] for v in sim], color=color, marker="o", ms=3, label=label)
             ax.plot(x, [v - pred[0] for v in pred], color=color, ls="--", marker="o", ms=3)
             if f"midway_{key}" in row:
