@@ -13,7 +13,7 @@ from garsim.model.config import GarSimConfig
 from garsim.train.augment import MirrorAugmented, RemeshAugmented, mirror_sample
 from garsim.train.data import rest_sample
 from garsim.train.losses import LossWeights, fabric_pair_loss, garsim_loss
-from garsim.train.pairs import MIRROR_SUFFIX, pair_ids, pair_key, pair_keys, plan_batches
+from garsim.train.pairs import MIRROR_SUFFIX, pair_ids, pair_key, pair_keys, plan_batches, shard_indices
 from garsim.train.trainer import TrainConfig, Trainer
 
 
@@ -73,6 +73,25 @@ def test_plans_keep_groups_together_and_cover_every_index_once():
     assert counts == {7}  # 4 + 4 + 4 + (2 + 2 singles) + 11 singles in 3 -> the count does not depend on the draw
     with pytest.raises(ValueError, match="batch_size"):
         plan_batches(ids, 0, np.random.default_rng(0))
+
+
+def test_shards_partition_the_samples_with_whole_groups_in_near_equal_halves():
+    """The fixed DDP shards: every index in exactly one, a group never split, sizes within half a group of equal,
+    the same partition on every call (each process computes all of them), and one shard for one process."""
+    ids = np.array([0, 0, 0, 0, -1, -1, 1, 1, 1, 1, -1, -1, -1, 2, 2])
+    shards = shard_indices(ids, 2, seed=0)
+    assert sorted(np.concatenate(shards).tolist()) == list(range(len(ids)))
+    for g in (0, 1, 2):
+        assert sum(bool(np.isin(np.flatnonzero(ids == g), s).all()) for s in shards) == 1
+    assert [len(s) for s in shards] == [7, 8]
+    assert all((a == b).all() for a, b in zip(shards, shard_indices(ids, 2, seed=0)))
+    assert shard_indices(ids, 1)[0].tolist() == list(range(len(ids)))
+    rng = np.random.default_rng(1)
+    many = np.where(rng.random(5000) < 0.5, rng.integers(0, 600, 5000), -1)
+    sizes = [len(s) for s in shard_indices(many, 3, seed=4)]
+    assert sum(sizes) == 5000 and max(sizes) - min(sizes) <= 2 * np.bincount(many[many >= 0]).max()
+    with pytest.raises(ValueError, match="world"):
+        shard_indices(ids, 0)
 
 
 def test_pair_loss_is_the_deviation_from_the_groups_mean_error():

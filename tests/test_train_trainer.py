@@ -92,7 +92,8 @@ t = Trainer(cfg, tc, samples[:4], samples[4:])
 hist = t.fit()
 flat = torch.cat([p.detach().ravel() for p in t.model.parameters()])
 json.dump({"rank": dist.get_rank(), "world": dist.get_world_size(), "sum": float(flat.double().sum()),
-           "hist": hist}, open(f"{out}/rank{dist.get_rank()}.json", "w"))
+           "hist": hist, "built": sorted(t.train_set._graphs), "steps": t.steps_per_epoch()},
+          open(f"{out}/rank{dist.get_rank()}.json", "w"))
 """
 
 
@@ -129,6 +130,8 @@ def test_ddp_two_processes(tmp_path, data):
     r0, r1 = (json.loads((out / f"rank{r}.json").read_text()) for r in (0, 1))
     assert r0["world"] == r1["world"] == 2
     assert r0["sum"] == r1["sum"]  # DDP kept the replicas identical
+    assert r0["steps"] == r1["steps"] == 2  # 4 samples, batch 1: each process its own half, as many steps
+    assert sorted(r0["built"] + r1["built"]) == [0, 1, 2, 3]  # each built only its shard's graphs
     assert r0["hist"][-1]["val_err_mm"] == r1["hist"][-1]["val_err_mm"]
     assert (out / "checkpoint" / "optimizer.safetensors").exists() and (out / "log.csv").exists()
 

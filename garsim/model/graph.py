@@ -7,11 +7,11 @@ from collections.abc import Sequence
 
 import numpy as np
 import torch
-from scipy.spatial import cKDTree
 from torch_geometric.data import Batch, Data
 
 from garsim.data.sample import Sample
 from garsim.geometry.mesh import vertex_normals_at
+from garsim.geometry.proximity import nearest_vertices
 from garsim.model.config import GarSimConfig
 from garsim.model.inputs import graph_arrays
 
@@ -65,8 +65,8 @@ def collision_body(sample: Sample, k: int = 16) -> dict[str, torch.Tensor]:
     """Target-body vertices near the garment (k nearest of each prior/target vertex) and their unit normals."""
     body_t = np.asarray(sample.body_target, dtype=np.float32)
     pts = sample.prior if sample.target is None else np.concatenate([sample.prior, sample.target])
-    _, idx = cKDTree(body_t).query(pts, k=min(k, len(body_t)), workers=-1)
-    sel = np.unique(np.asarray(idx).ravel())
+    idx, _ = nearest_vertices(pts, body_t, k=min(k, len(body_t)))  # the body's tree is cached (paired fabrics)
+    sel = np.unique(idx.ravel())
     normals = vertex_normals_at(body_t, np.asarray(sample.body_faces, dtype=np.int64), sel)
     return {
         "col_body": torch.from_numpy(body_t[sel].copy()),

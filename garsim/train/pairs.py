@@ -64,3 +64,23 @@ def plan_batches(ids: np.ndarray, batch_size: int, rng: np.random.Generator) -> 
             batches.append(batch)
     batches += [[int(i) for i in singles[s : s + batch_size]] for s in range(0, len(singles), batch_size)]
     return [batches[i] for i in rng.permutation(len(batches))]
+
+
+def shard_indices(ids: np.ndarray, world: int, seed: int = 0) -> list[np.ndarray]:
+    """A fixed partition of ``range(len(ids))`` into ``world`` shards of near-equal size, each group (ids >= 0)
+    whole in one shard: the samples one DDP process trains on every epoch, so each process builds and caches
+    the graphs of its own shard only (a reshuffled split would have every process build every graph)."""
+    if world < 1:
+        raise ValueError(f"world must be >= 1, got {world}")
+    ids = np.asarray(ids)
+    order = np.random.default_rng(seed).permutation(len(ids))
+    # units in a seeded order: each group once (at its first member), each ungrouped index alone
+    unit = np.where(ids[order] >= 0, ids[order], -1 - order)
+    _, first, inverse, sizes = np.unique(unit, return_index=True, return_inverse=True, return_counts=True)
+    rank_of_unit = np.argsort(np.argsort(first))  # units ranked by where they first appear
+    size_in_order = sizes[np.argsort(first)]
+    middle = np.cumsum(size_in_order) - size_in_order / 2  # where each unit's middle falls in the order
+    shard_of_unit = np.minimum((middle * world / max(len(ids), 1)).astype(np.int64), world - 1)
+    shard = np.empty(len(ids), dtype=np.int64)
+    shard[order] = shard_of_unit[rank_of_unit[inverse]]
+    return [np.flatnonzero(shard == r) for r in range(world)]

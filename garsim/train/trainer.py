@@ -25,7 +25,6 @@ import torch
 import torch.distributed as dist
 from safetensors.torch import load_file, save_file
 from torch.utils.data import DataLoader, Dataset
-from torch.utils.data.distributed import DistributedSampler
 
 from garsim.atomic import atomic_write
 from garsim.data.sample import Sample
@@ -34,7 +33,7 @@ from garsim.model.config import GarSimConfig, check_known_keys
 from garsim.model.garsim import GraphModel
 from garsim.model.graph import GarmentGraph, build_graph, collate
 from garsim.train.losses import LossWeights, collision_fraction, garsim_loss, per_graph_error_mm
-from garsim.train.pairs import pair_ids, plan_batches
+from garsim.train.pairs import pair_ids, plan_batches, shard_indices
 
 CSV_FIELDS = (
     "epoch",
@@ -243,8 +242,16 @@ class Trainer:
             train_samples, model_config, with_collision=True, make_graph=make_graph, pairs=pairs
         )
         self.pair_ids = self.train_set.pair_ids
-        if pairs:
-            self._paired_batches = len(self._paired_plan(0))  # the count is the same every epoch
+        # each process trains on a fixed shard of the samples (paired groups whole), so it builds and caches only
+        # that shard's graphs; every process takes as many steps as the largest shard has batches
+        groups = self.pair_ids if self.pair_ids is not None else np.full(len(self.train_set), -1)
+        self._groups = groups
+        shards = shard_indices(groups, self.world, train_config.seed)
+        if any(len(s) == 0 for s in shards):
+            raise ValueError(f"{len(groups)} training samples cannot feed {self.world} processes: use fewer")
+        self.shard = shards[self.rank]
+        rng = np.random.default_rng(0)  # the batch count depends on the group sizes only
+        self._batches = max(len(plan_batches(groups[s], train_config.batch_size, rng)) for s in shards)
         self.val_set = (
             GraphDataset(val_samples, model_config, with_collision=True, make_graph=make_graph)
             if val_samples is not None
@@ -272,17 +279,17 @@ class Trainer:
             self.load_checkpoint(self.out / "checkpoint")
 
     # -- schedule ---------------------------------------------------------------------------
-    def _paired_plan(self, epoch: int) -> list[list[int]]:
-        """This epoch's batches with every paired-fabric group in one batch (all ranks draw the same plan)."""
-        rng = np.random.default_rng([self.cfg.seed, epoch])
-        return plan_batches(self.pair_ids, self.cfg.batch_size, rng)
+    def _plan(self, epoch: int) -> list[list[int]]:
+        """This process's batches of an epoch: its shard reshuffled, every paired-fabric group in one batch, cycled
+        to the common step count."""
+        rng = np.random.default_rng([self.cfg.seed, epoch, self.rank])
+        local = plan_batches(self._groups[self.shard], self.cfg.batch_size, rng)
+        mine = [[int(self.shard[i]) for i in batch] for batch in local]
+        return [mine[i % len(mine)] for i in range(self._batches)] if mine else []
 
     def steps_per_epoch(self) -> int:
         """Optimizer steps per epoch on this rank."""
-        if self.pair_ids is not None:
-            steps = math.ceil(self._paired_batches / self.world)
-        else:
-            steps = math.ceil(math.ceil(len(self.train_set) / self.world) / self.cfg.batch_size)
+        steps = self._batches
         return min(steps, self.cfg.max_steps_per_epoch) if self.cfg.max_steps_per_epoch else steps
 
     def lr_at(self, step: int) -> float:
@@ -296,21 +303,7 @@ class Trainer:
 
     # -- loops ------------------------------------------------------------------------------
     def _loader(self, epoch: int) -> DataLoader:
-        if self.pair_ids is not None:
-            plan = self._paired_plan(epoch)
-            mine = plan[self.rank :: self.world]
-            mine += plan[: math.ceil(len(plan) / self.world) - len(mine)]  # every rank takes as many steps
-            return DataLoader(self.train_set, batch_sampler=mine, collate_fn=collate)
-        if self.world > 1:
-            sampler = DistributedSampler(
-                self.train_set, num_replicas=self.world, rank=self.rank, shuffle=True, seed=self.cfg.seed
-            )
-            sampler.set_epoch(epoch)
-            return DataLoader(self.train_set, batch_size=self.cfg.batch_size, sampler=sampler, collate_fn=collate)
-        gen = torch.Generator().manual_seed(self.cfg.seed * 1000003 + epoch)
-        return DataLoader(
-            self.train_set, batch_size=self.cfg.batch_size, shuffle=True, generator=gen, collate_fn=collate
-        )
+        return DataLoader(self.train_set, batch_sampler=self._plan(epoch), collate_fn=collate)
 
     def _check_finite(self, terms: dict[str, torch.Tensor], batch) -> None:
         bad = ~torch.isfinite(terms["total"].detach())
