@@ -92,7 +92,7 @@ t = Trainer(cfg, tc, samples[:4], samples[4:])
 hist = t.fit()
 flat = torch.cat([p.detach().ravel() for p in t.model.parameters()])
 json.dump({"rank": dist.get_rank(), "world": dist.get_world_size(), "sum": float(flat.double().sum()),
-           "hist": hist, "built": sorted(t.train_set._graphs), "steps": t.steps_per_epoch()},
+           "hist": hist, "built": t.train_set.cached_indices(), "steps": t.steps_per_epoch()},
           open(f"{out}/rank{dist.get_rank()}.json", "w"))
 """
 
