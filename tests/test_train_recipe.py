@@ -1,4 +1,6 @@
-"""``examples/train_v1.sh``, the documented training recipe, runs its stages end to end on the fixture."""
+"""``examples/train_v1.sh``, the documented training recipe, runs its stages end to end on the fixture, as documented:
+two DDP processes (each on its shard of the samples, paired groups whole) and mirror images (the fixture holds no
+full-resolution training meshes to remesh)."""
 
 import json
 import os
@@ -18,8 +20,8 @@ def test_recipe_runs_every_stage_and_averages_the_fine_tunes(tmp_path):
         **os.environ,
         "DATA": str(ROOT / "tests" / "fixtures" / "dataset_v2"),
         "OUT": str(tmp_path),
-        **dict(PROCS="1", BATCH="2", STAGE1_EPOCHS="1", FINETUNE_EPOCHS="1", FABRIC_EPOCHS="1", STAGE2_EPOCHS="0"),
-        **dict(SOUP="1", PAIR="1"),
+        **dict(PROCS="2", BATCH="2", STAGE1_EPOCHS="1", FINETUNE_EPOCHS="1", FABRIC_EPOCHS="1", STAGE2_EPOCHS="0"),
+        **dict(SOUP="1", PAIR="1", MIRROR="1"),
     }
     r = subprocess.run(["bash", "examples/train_v1.sh"], cwd=ROOT, env=env, capture_output=True, text=True)
     assert r.returncode == 0, r.stderr[-2000:]
