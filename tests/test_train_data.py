@@ -3,7 +3,6 @@
 import pytest
 from store_fixtures import make_record
 
-from garsim.data.sample import FABRICS
 from garsim.data.store import DatasetStore
 from garsim.train.data import train_val_samples
 
@@ -47,26 +46,6 @@ def test_rest_samples_teach_a_still_body_to_leave_the_template(tmp_path):
         np.testing.assert_array_equal(s.target, s.garment)
         np.testing.assert_array_equal(s.prior, s.garment)
     assert len(train_val_samples(tmp_path, "low", val_every=3, rest=False)[0]) == 4
-
-
-def test_a_paired_group_gives_one_rest_sample_and_the_fabrics_share_them(tmp_path):
-    """The four fabric copies of one job share template and body: one rest sample for the group, from the copy a
-    stable hash of the job picks, so over many groups every fabric gives some; an unpaired job gives its own."""
-    from garsim.train.data import rest_records
-
-    store = DatasetStore(tmp_path)
-    jobs = [*((f"train-1-{f}", "train-1") for f in FABRICS), ("train-2", "train-2"), ("train-3", "train-3")]
-    for seq_id, job in jobs:
-        rec = make_record(seq_id, "train", k=1, seed=len(seq_id))
-        rec.meta["settle"] = {"settled": True}
-        store.append_manifest({**store.write_sequence(rec), "job": job})
-    train, _ = train_val_samples(tmp_path, "low", val_every=3)  # job train-3 held out
-    rest = sorted(s.meta["name"] for s in train if s.meta.get("rest"))
-    assert len(rest) == 2 and rest[1] == "train-2@rest" and rest[0].startswith("train-1-")
-    assert len(train) == 5 + 2
-    groups = [[{"id": f"train-{j}-{f}", "job": f"train-{j}"} for f in FABRICS] for j in range(40)]
-    chosen = {r.rsplit("-", 1)[1] for g in groups for r in rest_records(g)}
-    assert chosen == set(FABRICS)
 
 
 def test_families_and_fraction_pick_whole_jobs(tmp_path):

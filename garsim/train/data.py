@@ -5,7 +5,6 @@ from __future__ import annotations
 import dataclasses
 import os
 import random
-import zlib
 from collections.abc import Sequence
 
 from garsim.data.sample import GARMENT_TYPES, Sample
@@ -52,9 +51,9 @@ def train_val_samples(
 
     Validation holds whole jobs (garment instance, body and poses unseen in training; all fabric copies of
     a paired group together), so nothing of a validation instance is trained on.
-    ``resolution="both"`` takes every frame at the low and at the full resolution (one model for any mesh
-    density). ``rest`` adds one rest sample per settled training job (``rest_sample``; of one fabric copy of a
-    paired group: ``rest_records``). ``families`` (garment types) keeps only those families, in
+    ``resolution="both"`` takes every frame at the
+    low and at the full resolution (one model for any mesh density). ``rest`` adds one rest sample per
+    settled training record (``rest_sample``). ``families`` (garment types) keeps only those families, in
     training and in validation. ``fraction`` trains on that share of the remaining training jobs (whole jobs,
     at least one, picked by ``seed``; a smaller share's jobs are a subset of a larger one's), validation unchanged.
     """
@@ -83,22 +82,10 @@ def train_val_samples(
     kept = set(kept[: max(1, round(fraction * len(kept)))])
     train: list[Sample] = []
     val: list[Sample] = []
-    entries = sorted(entries, key=lambda e: e["id"])
-    resting = rest_records(entries) if rest else set()
-    for entry in entries:
+    for entry in sorted(entries, key=lambda e: e["id"]):
         job = entry.get("job", entry["id"])
         if job in held:
             val.extend(s for level in levels for s in store.read_sequence(entry).samples(level))
         elif job in kept:
-            train.extend(record_samples(store.read_sequence(entry), levels, entry["id"] in resting))
+            train.extend(record_samples(store.read_sequence(entry), levels, rest))
     return train, val
-
-
-def rest_records(entries: Sequence[dict]) -> set[str]:
-    """The ids of the records that give a rest sample: one per job (a garment instance on its canonical body). The
-    fabric copies of a paired group share template and body, so their rest samples would be one sample four times
-    over; the group's is the copy picked by a stable hash of the job, so each fabric gets about a quarter of them."""
-    by_job: dict[str, list[str]] = {}
-    for e in entries:
-        by_job.setdefault(str(e.get("job", e["id"])), []).append(e["id"])
-    return {sorted(ids)[zlib.crc32(job.encode()) % len(ids)] for job, ids in by_job.items()}
