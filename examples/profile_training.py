@@ -25,7 +25,7 @@ from garsim.model.garsim import GarSimModel
 from garsim.train.augment import MirrorAugmented, remesh_augmented
 from garsim.train.data import train_val_samples
 from garsim.train.losses import LossWeights
-from garsim.train.trainer import Trainer, TrainConfig
+from garsim.train.trainer import TrainConfig, Trainer
 
 
 def main() -> None:
