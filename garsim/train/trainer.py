@@ -299,7 +299,7 @@ class Trainer:
         rng = np.random.default_rng([self.cfg.seed, epoch, self.rank])
         local = plan_batches(self._groups[self.shard], self.cfg.batch_size, rng)
         mine = [[int(self.shard[i]) for i in batch] for batch in local]
-        return [mine[i % len(mine)] for i in range(self._batches)] if mine else []
+        return [mine[i % len(mine)] for i in range(self._batches)]  # no shard is empty (__init__)
 
     def steps_per_epoch(self) -> int:
         """Optimizer steps per epoch on this rank."""
