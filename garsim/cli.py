@@ -67,7 +67,7 @@ _THREAD_VARS = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")
 _USER_ERRORS = (ValueError, OSError, RuntimeError)
 """Exceptions reported as one line (MeshError and ExportError are ValueErrors; a missing, unreadable or
 unwritable file an OSError); anything else is a bug and keeps its traceback."""
-WIDENING_FLAGS = ("fabric_decoder_film", "global_context", "target_surface")
+WIDENING_FLAGS = ("fabric_decoder_film", "global_context", "target_surface", "local_rotation")
 """GarSimConfig switches that `garsim train` can add to a model (new layers at zero, `GraphModel.widened`)."""
 
 
@@ -597,7 +597,7 @@ def cmd_train(args: argparse.Namespace) -> int:
     added = {k: True for k in WIDENING_FLAGS if getattr(args, k) and not getattr(model_config, k)}
     if added and cfg.model != "garsim":
         flag = "--" + next(iter(added)).replace("_", "-")
-        raise ValueError(f"{flag} is a layer of GarSim; the {cfg.model!r} model has none")
+        raise ValueError(f"{flag} is an option of GarSim; the {cfg.model!r} model has none")
     if added:
         model_config = dataclasses.replace(model_config, **added)
         init = init.widened(model_config) if init is not None else None  # its new layers start at zero
@@ -1013,6 +1013,12 @@ def build_parser() -> argparse.ArgumentParser:
         help="per vertex, the prior's offset from the target body's nearby surface, its normal and signed distance, "
         "encoded into the node latents (GarSimConfig.target_surface); with --init, added to that model's weights at "
         "zero",
+    )
+    p.add_argument(
+        "--local-rotation",
+        action="store_true",
+        help="turn each vertex's decoded correction with the rotation that carries its template neighbourhood onto "
+        "the prior's (GarSimConfig.local_rotation; no weights of its own); with --init, that model's weights read so",
     )
     p.add_argument(
         "--num-steps",

@@ -731,6 +731,7 @@ def test_fine_tune_with_new_layers_and_the_fold_term(tmp_path, capsys):
         "--fabric-decoder-film",
         "--global-context",
         "--target-surface",
+        "--local-rotation",
         "--num-steps",
         "6",
         "--trainable",
@@ -751,13 +752,14 @@ def test_fine_tune_with_new_layers_and_the_fold_term(tmp_path, capsys):
     assert new["decoder.fabric_film.weight"].abs().sum() > 0  # started at zero, trained
     assert new["processor.glob.0.mlp.2.weight"].abs().sum() > 0
     assert after.config.target_surface and new["surface_encoder.mlp.2.weight"].abs().sum() > 0
+    assert after.config.local_rotation and not before.config.local_rotation
     cfg = json.loads((run / "train_config.json").read_text())
     assert cfg["trainable"] == ["processor.film", "processor.glob", "decoder.fabric_film", "surface_encoder"]
     assert cfg["losses"]["fold"] == 0.3 and cfg["losses"]["relative"] == 0.03
     deepsd = ["--out", str(tmp_path / "d"), "--model", "deepsd", "--global-context"]
     capsys.readouterr()
     assert main([*args, *deepsd]) == 2
-    assert "layer of GarSim" in _one_error_line(capsys)
+    assert "option of GarSim" in _one_error_line(capsys)
     assert (run / "best" / WEIGHTS_FILE).exists()
 
 

@@ -1,5 +1,6 @@
 """GarSimModel: batching, permutation/translation/yaw equivariance, heads, save/load, speed."""
 
+import dataclasses
 import time
 
 import numpy as np
@@ -61,9 +62,13 @@ def test_permuting_vertices_permutes_output(samples):
     np.testing.assert_allclose(out_p, out[perm], atol=2e-6)
 
 
-@pytest.mark.parametrize("head", ["direction_magnitude", "displacement", "position"])
-def test_translation_and_yaw_equivariance(samples, head):
-    m = _model(head=head)
+@pytest.mark.parametrize(
+    "options",
+    [dict(head="direction_magnitude"), dict(head="displacement"), dict(head="position"), dict(local_rotation=True)],
+    ids=["direction_magnitude", "displacement", "position", "local rotation"],
+)
+def test_translation_and_yaw_equivariance(samples, options):
+    m = _model(**options)
     s = samples[0]
     rz, t = rot_z(0.9), np.array([0.35, -0.6, 0.2])
     out = m.predict(s).astype(np.float64)
@@ -208,7 +213,6 @@ def test_mean_aggregator_matches_brute_force():
 def test_widened_model_keeps_the_weights_and_starts_its_new_layer_at_zero():
     """``widened``: the same prediction with the decoder FiLM and the global context added (zero-initialised); a
     config that changes a weight's shape is refused."""
-    import dataclasses
 
     model = GarSimModel(GarSimConfig(latent=16, edge_latent=8, mlp_hidden=16, num_steps=2)).eval()
     wide = model.widened(dataclasses.replace(model.config, fabric_decoder_film=True, global_context=True))
@@ -258,7 +262,6 @@ def test_graph_pool_takes_each_graphs_mean_and_max():
 def test_global_context_sees_the_whole_garment_but_not_the_other_graphs_of_a_batch():
     """One message-passing step: a change of one vertex's prior reaches only its mesh 1-ring without the global
     context and every vertex with it; batched with another garment, each prediction equals its own."""
-    import dataclasses
 
     from scipy.sparse.csgraph import shortest_path
 
@@ -292,7 +295,6 @@ def test_global_context_sees_the_whole_garment_but_not_the_other_graphs_of_a_bat
 def test_target_surface_starts_at_zero_and_learns():
     """A model widened by ``target_surface`` predicts as before, and its encoder's zeroed last layer gets a
     gradient."""
-    import dataclasses
 
     torch.manual_seed(0)
     cfg = GarSimConfig(latent=16, edge_latent=8, mlp_hidden=16, num_steps=1, head="displacement")
@@ -304,3 +306,24 @@ def test_target_surface_starts_at_zero_and_learns():
     graph = build_graph(sample, wide.config)
     (wide(graph) - graph.target).square().sum().backward()
     assert wide.surface_encoder.mlp[-1].weight.grad.abs().sum() > 0
+
+
+def test_local_rotation_turns_the_correction_with_a_rigidly_turned_prior(samples):
+    """With ``local_rotation`` and the prior the template turned rigidly by R (and moved), every vertex's correction
+    is R times the one the same weights give without it; at rest (prior = template) the two models agree."""
+    plain = _model(head="displacement")
+    turned = plain.widened(dataclasses.replace(plain.config, local_rotation=True)).eval()
+    s = samples[0]
+    r = rot_z(0.7) @ np.array([[1.0, 0.0, 0.0], [0.0, np.cos(0.5), -np.sin(0.5)], [0.0, np.sin(0.5), np.cos(0.5)]])
+    moved = dataclasses.replace(s, prior=(s.garment.astype(np.float64) @ r.T + [0.1, -0.2, 0.05]).astype(np.float32))
+    np.testing.assert_allclose(
+        build_graph(moved, turned.config).local_rot.numpy(),
+        np.broadcast_to(r, (len(s.garment), 3, 3)),
+        atol=2e-5,
+    )
+    base = moved.prior.astype(np.float64)
+    correction = plain.predict(moved).astype(np.float64) - base
+    assert np.abs(correction).max() > 1e-3
+    np.testing.assert_allclose(turned.predict(moved) - base, correction @ r.T, atol=2e-5)
+    rest = dataclasses.replace(s, prior=s.garment.copy())
+    np.testing.assert_allclose(turned.predict(rest), plain.predict(rest), atol=1e-6)

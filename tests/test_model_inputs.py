@@ -236,3 +236,21 @@ def test_target_surface_input_follows_the_scene_and_is_continuous(sample):
     noisy = dataclasses.replace(sample, prior=sample.prior + rng.normal(0, 1e-7, sample.prior.shape).astype("f4"))
     assert np.abs(build_graph(noisy, cfg).surface.numpy() - g0.surface.numpy()).max() < 1e-4
     assert not hasattr(build_graph(sample), "surface")  # off by default: the paper's inputs only
+
+
+def test_local_rotations_follow_the_scene_and_are_continuous(sample):
+    """The per-vertex rotations of ``local_rotation`` turn with a yaw of the whole scene (R -> Rz R Rz^T), ignore a
+    translation, are proper rotations, and 1e-7 m of noise on the prior moves them by about as much."""
+    cfg = GarSimConfig(local_rotation=True)
+    r0 = build_graph(sample, cfg).local_rot.numpy().astype(np.float64)
+    assert r0.shape == (len(sample.garment), 3, 3)
+    np.testing.assert_allclose(np.linalg.det(r0), 1.0, atol=1e-5)
+    np.testing.assert_allclose(r0 @ r0.transpose(0, 2, 1), np.broadcast_to(np.eye(3), r0.shape), atol=1e-5)
+    assert np.abs(r0 - np.eye(3)).max() > 0.05  # the pose turns the garment somewhere: a real test
+    rz = rot_z(-2.0)
+    r1 = build_graph(transform_sample(sample, rz, np.array([0.4, 0.3, -0.2])), cfg).local_rot.numpy()
+    np.testing.assert_allclose(r1, rz @ r0 @ rz.T, atol=5e-5)
+    rng = np.random.default_rng(0)
+    noisy = dataclasses.replace(sample, prior=sample.prior + rng.normal(0, 1e-7, sample.prior.shape).astype("f4"))
+    assert np.abs(build_graph(noisy, cfg).local_rot.numpy() - r0).max() < 1e-4
+    assert not hasattr(build_graph(sample), "local_rot")  # off by default

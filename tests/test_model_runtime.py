@@ -29,6 +29,7 @@ CONFIGS = {
     "shared weights, no film, no residual": dict(share_weights=True, fabric_film=False, residual=False),
     "displacement, global context": dict(head="displacement", global_context=True),
     "target surface": dict(target_surface=True),
+    "displacement, local rotation": dict(head="displacement", local_rotation=True),
     "no message passing, no norm": dict(num_steps=0, layer_norm=False),
 }
 

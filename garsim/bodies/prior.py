@@ -20,34 +20,45 @@ from garsim.geometry.proximity import soft_anchor
 from garsim.geometry.skinning import apply_transforms
 
 
+def ring_operator(faces: np.ndarray, num_vertices: int, rings: int = 2) -> tuple[np.ndarray, sp.csr_matrix]:
+    """The mesh's unique edges (E, 2) and the (V, E) operator that sums a per-edge quantity over each vertex's
+    neighbourhood of ``rings`` rings (an edge counted once per path that reaches it): the pose-free part of
+    :func:`vertex_rotations`, to reuse over many poses of one mesh."""
+    e = unique_edges(faces)
+    # each edge contributes to both endpoints (the outer product is symmetric in direction)
+    inc = sp.coo_matrix(
+        (np.ones(2 * len(e)), (np.concatenate([e[:, 0], e[:, 1]]), np.tile(np.arange(len(e)), 2))),
+        shape=(num_vertices, len(e)),
+    ).tocsr()
+    adj = (inc @ inc.T).tocsr()
+    adj.data[:] = 1.0
+    op = inc
+    for _ in range(max(rings - 1, 0)):
+        op = adj @ op
+    return e, op.tocsr()
+
+
+def rotations_between(canonical: np.ndarray, target: np.ndarray, edges: np.ndarray, op: sp.csr_matrix) -> np.ndarray:
+    """(R, 3, 3) best rotation per row of ``op`` (a :func:`ring_operator`, or rows of it) mapping the canonical
+    neighbourhood edges onto the target's (Kabsch, no reflection)."""
+    c = np.asarray(canonical, dtype=np.float64)
+    t = np.asarray(target, dtype=np.float64)
+    ec = c[edges[:, 1]] - c[edges[:, 0]]
+    et = t[edges[:, 1]] - t[edges[:, 0]]
+    cov = op @ np.einsum("ei,ej->eij", ec, et).reshape(-1, 9)
+    u, _, vt = np.linalg.svd(cov.reshape(-1, 3, 3))
+    d = np.sign(np.linalg.det(np.einsum("vij,vjk->vik", u, vt)))
+    vt[:, 2, :] *= d[:, None]
+    return np.einsum("vij,vjk->vik", u, vt).transpose(0, 2, 1)
+
+
 def vertex_rotations(
     canonical: np.ndarray, target: np.ndarray, faces: np.ndarray, rings: int = 2, subset: np.ndarray | None = None
 ) -> np.ndarray:
     """(V, 3, 3) best rotation per body vertex (or per vertex of ``subset``) mapping its canonical
     neighbourhood edges onto its target edges."""
-    c = np.asarray(canonical, dtype=np.float64)
-    t = np.asarray(target, dtype=np.float64)
-    e = unique_edges(faces)
-    ec = c[e[:, 1]] - c[e[:, 0]]
-    et = t[e[:, 1]] - t[e[:, 0]]
-    outer = np.einsum("ei,ej->eij", ec, et).reshape(-1, 9)
-    v = len(c)
-    # each edge contributes to both endpoints (the outer product is symmetric in direction)
-    inc = sp.coo_matrix(
-        (np.ones(2 * len(e)), (np.concatenate([e[:, 0], e[:, 1]]), np.tile(np.arange(len(e)), 2))),
-        shape=(v, len(e)),
-    ).tocsr()
-    cov = inc @ outer
-    adj = (inc @ inc.T).tocsr()
-    adj.data[:] = 1.0
-    for _ in range(max(rings - 1, 0)):
-        cov = adj @ cov
-    if subset is not None:
-        cov = cov[subset]
-    u, _, vt = np.linalg.svd(cov.reshape(-1, 3, 3))
-    d = np.sign(np.linalg.det(np.einsum("vij,vjk->vik", u, vt)))
-    vt[:, 2, :] *= d[:, None]
-    return np.einsum("vij,vjk->vik", u, vt).transpose(0, 2, 1)
+    edges, op = ring_operator(faces, len(canonical), rings)
+    return rotations_between(canonical, target, edges, op if subset is None else op[subset])
 
 
 def rigfree_prior(garment: np.ndarray, canonical: np.ndarray, target: np.ndarray, faces: np.ndarray) -> np.ndarray:

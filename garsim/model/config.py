@@ -81,6 +81,11 @@ class GarSimConfig:
     # surface's blended normal and the signed distance along it, encoded by an MLP added to the node latents
     # (zero-initialised: off at the start)
     target_surface: bool = False
+    # local rotation (a deviation: the paper adds the decoded vector to G^prior as it is, in one frame for the whole
+    # garment). The decoded correction is taken as one in the template's rest frame and turned, per vertex, by the
+    # rotation that carries the template's mesh neighbourhood onto the prior's (``bodies.prior.rotations_between``), as
+    # DeePSD skins its pose-space displacements: a sleeve's learned correction turns with the arm. No weights of its own
+    local_rotation: bool = False
 
     def __post_init__(self) -> None:
         self.semantic_grid = tuple(int(v) for v in self.semantic_grid)  # type: ignore[assignment]

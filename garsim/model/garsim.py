@@ -184,6 +184,8 @@ class GarSimModel(GraphModel):
             world = vec @ data.rot[0].to(vec.dtype)
         else:
             world = torch.einsum("nij,ni->nj", data.rot[batch], vec)
+        if self.config.local_rotation:  # a rest-frame correction, turned with its neighbourhood
+            world = torch.einsum("nij,nj->ni", data.local_rot.to(world.dtype), world)
         base = data.anchor if self.config.head == "position" else data.prior
         pred = base + world
         if return_parts:

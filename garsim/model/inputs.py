@@ -13,7 +13,8 @@ body-semantic input splats max_i w_ij per body vertex. Fabric: physical values (
 areal density and stretch, scaled so silk = 0 and leather = 1), not a one-hot. Per directed mesh
 edge (i -> j): E_ij = G_j − G_i and E^prior_ij. Faces and face pairs for the losses. With ``target_surface``
 (off in the paper and in the shipped model) the prior's soft anchor on the target body: offset, normal, signed
-distance.
+distance. With ``local_rotation`` (off in the paper and in the shipped model) per vertex the rotation that carries the
+template's mesh neighbourhood onto the prior's (``local_rot``), which turns the decoded correction.
 Everything about the canonical body alone (KD-tree, yaw frame, rings) is computed once per body and cached by content.
 
 Frame: all vectors are expressed in a body frame (rotation ``rot``, world -> frame) whose
@@ -30,6 +31,7 @@ import itertools
 import numpy as np
 import scipy.sparse as sp
 
+from garsim.bodies.prior import ring_operator, rotations_between
 from garsim.data.sample import Sample
 from garsim.garments.fabrics import PRESETS as FABRIC_PRESETS
 from garsim.garments.fabrics import Fabric, fabric_from_values, get_fabric
@@ -220,6 +222,8 @@ class StaticGraph:
         self.rot64 = body.rot64
         self.body_faces = body.faces
         self.target_surface = cfg.target_surface
+        # local rotation: the template's 2-ring edge sums, once per garment
+        self.ring = ring_operator(faces, n, rings=2) if cfg.local_rotation else None
         # every vector in the body frame, in float64 (then float32): rotate the points, then subtract
         gf = g.astype(np.float64) @ self.rot64.T
         self.bq = self.anchor_w @ body.framed64[used]
@@ -261,6 +265,8 @@ class StaticGraph:
         }
         if self.target_surface:
             arrays["surface"] = target_surface(prior, body_target, self.body_faces, self.rot64)
+        if self.ring is not None:
+            arrays["local_rot"] = rotations_between(self.arrays["pos"], prior, *self.ring).astype(np.float32)
         return arrays
 
 
@@ -289,6 +295,7 @@ def static_graph(sample: Sample, config: GarSimConfig | None = None, name: str |
         cfg.semantic_grid,
         cfg.num_body_vertices,
         cfg.target_surface,
+        cfg.local_rotation,
     )
     key = content_key(sample.garment, sample.garment_faces, sample.body_canonical, sample.body_faces) + inputs
 

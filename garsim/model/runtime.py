@@ -217,6 +217,8 @@ class GarSimRuntime:
         node = self._process(node, edge, a["edge_index"], mean, fabric)
         vec = self._decode(node, fabric)
         world = vec @ a["rot"][0]  # R^T v for every row: body frame -> world
+        if self.config.local_rotation:  # a rest-frame correction, turned with its neighbourhood
+            world = np.einsum("nij,nj->ni", a["local_rot"], world)
         base = a["anchor"] if self.config.head == "position" else a["prior"]
         return (base + world).astype(np.float32)
 
