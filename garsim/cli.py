@@ -68,7 +68,8 @@ _USER_ERRORS = (ValueError, OSError, RuntimeError)
 """Exceptions reported as one line (MeshError and ExportError are ValueErrors; a missing, unreadable or
 unwritable file an OSError); anything else is a bug and keeps its traceback."""
 WIDENING_FLAGS = ("fabric_decoder_film", "global_context", "target_surface", "local_rotation")
-"""GarSimConfig switches that `garsim train` can add to a model (new layers at zero, `GraphModel.widened`)."""
+"""GarSimConfig switches that `garsim train` can add to a model (`GraphModel.widened`: new layers at zero;
+local_rotation adds none, it changes how the decoded correction is applied)."""
 
 
 class _HelpFormatter(argparse.RawDescriptionHelpFormatter):
