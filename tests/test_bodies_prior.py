@@ -3,7 +3,7 @@ import pytest
 
 from garsim.bodies.anny import AnnyBody
 from garsim.bodies.base import PosedBody
-from garsim.bodies.prior import garment_prior, rigfree_prior, vertex_rotations
+from garsim.bodies.prior import garment_prior, rigfree_prior, ring_operator, rotations_between, vertex_rotations
 
 POSE = {"upperleg01.L": [-0.8, 0.0, 0.0], "spine02": [0.0, 0.0, 0.5], "lowerarm01.R": [0.0, 0.0, 1.0]}
 
@@ -29,6 +29,21 @@ def test_rotations_of_a_rigid_rotation_are_that_rotation():
     r = np.array([[np.cos(angle), -np.sin(angle), 0], [np.sin(angle), np.cos(angle), 0], [0, 0, 1]])
     rot = vertex_rotations(m.vertices, m.vertices @ r.T + [1.0, 2.0, 3.0], m.faces)
     np.testing.assert_allclose(rot, np.broadcast_to(r, rot.shape), atol=1e-9)
+
+
+def test_rotations_through_a_ring_operator_equal_vertex_rotations():
+    """The per-garment operator (set up once, reused per pose) gives :func:`vertex_rotations`' values on a pose
+    that bends the mesh (rotations that differ per vertex)."""
+    import trimesh
+
+    m = trimesh.creation.icosphere(subdivisions=2)
+    v = np.asarray(m.vertices)
+    bent = v + 0.3 * np.stack([np.sin(2 * v[:, 2]), np.cos(3 * v[:, 0]), v[:, 1] ** 2], axis=1)
+    expected = vertex_rotations(v, bent, m.faces, rings=2)
+    assert np.abs(expected - expected[0]).max() > 0.1  # not one rotation for all: a real comparison
+    np.testing.assert_allclose(
+        rotations_between(v, bent, *ring_operator(m.faces, len(v), rings=2)), expected, atol=1e-9
+    )
 
 
 def test_rigfree_prior_moves_rigidly_with_a_rigid_body_motion():

@@ -20,10 +20,8 @@ from garsim.geometry.proximity import soft_anchor
 from garsim.geometry.skinning import apply_transforms
 
 
-def ring_operator(faces: np.ndarray, num_vertices: int, rings: int = 2) -> tuple[np.ndarray, sp.csr_matrix]:
-    """The mesh's unique edges (E, 2) and the (V, E) operator that sums a per-edge quantity over each vertex's
-    neighbourhood of ``rings`` rings (an edge counted once per path that reaches it): the pose-free part of
-    :func:`vertex_rotations`, to reuse over many poses of one mesh."""
+def _ring_matrices(faces: np.ndarray, num_vertices: int) -> tuple[np.ndarray, sp.csr_matrix, sp.csr_matrix]:
+    """Unique edges (E, 2), the (V, E) vertex-edge incidence and the (V, V) 1-ring adjacency (self included)."""
     e = unique_edges(faces)
     # each edge contributes to both endpoints (the outer product is symmetric in direction)
     inc = sp.coo_matrix(
@@ -32,20 +30,20 @@ def ring_operator(faces: np.ndarray, num_vertices: int, rings: int = 2) -> tuple
     ).tocsr()
     adj = (inc @ inc.T).tocsr()
     adj.data[:] = 1.0
-    op = inc
-    for _ in range(max(rings - 1, 0)):
-        op = adj @ op
-    return e, op.tocsr()
+    return e, inc, adj
 
 
-def rotations_between(canonical: np.ndarray, target: np.ndarray, edges: np.ndarray, op: sp.csr_matrix) -> np.ndarray:
-    """(R, 3, 3) best rotation per row of ``op`` (a :func:`ring_operator`, or rows of it) mapping the canonical
-    neighbourhood edges onto the target's (Kabsch, no reflection)."""
+def _edge_outer(canonical: np.ndarray, target: np.ndarray, edges: np.ndarray) -> np.ndarray:
+    """(E, 9) per edge the outer product of its canonical and its target vector (float64)."""
     c = np.asarray(canonical, dtype=np.float64)
     t = np.asarray(target, dtype=np.float64)
     ec = c[edges[:, 1]] - c[edges[:, 0]]
     et = t[edges[:, 1]] - t[edges[:, 0]]
-    cov = op @ np.einsum("ei,ej->eij", ec, et).reshape(-1, 9)
+    return np.einsum("ei,ej->eij", ec, et).reshape(-1, 9)
+
+
+def _kabsch(cov: np.ndarray) -> np.ndarray:
+    """(R, 9) summed edge outer products -> (R, 3, 3) the best rotations (no reflection) canonical -> target."""
     u, _, vt = np.linalg.svd(cov.reshape(-1, 3, 3))
     d = np.sign(np.linalg.det(np.einsum("vij,vjk->vik", u, vt)))
     vt[:, 2, :] *= d[:, None]
@@ -56,9 +54,27 @@ def vertex_rotations(
     canonical: np.ndarray, target: np.ndarray, faces: np.ndarray, rings: int = 2, subset: np.ndarray | None = None
 ) -> np.ndarray:
     """(V, 3, 3) best rotation per body vertex (or per vertex of ``subset``) mapping its canonical
-    neighbourhood edges onto its target edges."""
-    edges, op = ring_operator(faces, len(canonical), rings)
-    return rotations_between(canonical, target, edges, op if subset is None else op[subset])
+    neighbourhood edges onto its target edges (an edge counted once per path of ``rings`` rings that reaches it)."""
+    e, inc, adj = _ring_matrices(faces, len(canonical))
+    cov = inc @ _edge_outer(canonical, target, e)
+    for _ in range(max(rings - 1, 0)):
+        cov = adj @ cov
+    return _kabsch(cov if subset is None else cov[subset])
+
+
+def ring_operator(faces: np.ndarray, num_vertices: int, rings: int = 2) -> tuple[np.ndarray, sp.csr_matrix]:
+    """The pose-free part of :func:`vertex_rotations` for many poses of one small mesh (a garment): its unique edges
+    and the (V, E) operator that sums a per-edge quantity over each vertex's ``rings`` rings, for
+    :func:`rotations_between`. (One pose of a large mesh is cheaper through :func:`vertex_rotations`.)"""
+    e, op, adj = _ring_matrices(faces, num_vertices)
+    for _ in range(max(rings - 1, 0)):
+        op = adj @ op
+    return e, op.tocsr()
+
+
+def rotations_between(canonical: np.ndarray, target: np.ndarray, edges: np.ndarray, op: sp.csr_matrix) -> np.ndarray:
+    """:func:`vertex_rotations` through a :func:`ring_operator`: (V, 3, 3), the same rotations to rounding."""
+    return _kabsch(op @ _edge_outer(canonical, target, edges))
 
 
 def rigfree_prior(garment: np.ndarray, canonical: np.ndarray, target: np.ndarray, faces: np.ndarray) -> np.ndarray:

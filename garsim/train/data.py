@@ -51,11 +51,11 @@ def train_val_samples(
 
     Validation holds whole jobs (garment instance, body and poses unseen in training; all fabric copies of
     a paired group together), so nothing of a validation instance is trained on.
-    ``resolution="both"`` takes every frame at the
-    low and at the full resolution (one model for any mesh density). ``rest`` adds one rest sample per
-    settled training record (``rest_sample``). ``families`` (garment types) keeps only those families, in
-    training and in validation. ``fraction`` trains on that share of the remaining training jobs (whole jobs,
-    at least one, picked by ``seed``; a smaller share's jobs are a subset of a larger one's), validation unchanged.
+    ``resolution="both"`` takes every frame at the low and at the full resolution (one model for any mesh
+    density). ``rest`` adds one rest sample per settled training record (``rest_sample``). ``families`` (garment
+    types) keeps only those families, in training and in validation. ``fraction`` trains on that share of the
+    remaining training jobs (whole jobs, at least one, picked by ``seed``; a smaller share's jobs are a subset of a
+    larger one's), validation unchanged.
     """
     if resolution not in TRAIN_RESOLUTIONS:
         raise ValueError(f"resolution must be one of {TRAIN_RESOLUTIONS}, got {resolution!r}")
