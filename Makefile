@@ -48,10 +48,13 @@ results: $(STAMP)
 	  $(VENV)/bin/python $(EXTERNAL) --model $(MODEL) --json docs/external_default.json && \
 	  $(VENV)/bin/python examples/external_check.py --model $(MODEL) --raw --json docs/external_raw.json && \
 	  $(VENV)/bin/python examples/external_check.py --prior-only --refine --json docs/external_prior_refine.json; fi
+	$(VENV)/bin/python examples/robustness.py --model $(MODEL) --data tests/fixtures/dataset_v2 --data $(DATA) --split test \
+	  --per-type 10 $$([ -f $(EXTERNAL) ] && echo --external $(dir $(EXTERNAL))data) --json docs/robustness.json
 	$(VENV)/bin/garsim bench --model $(MODEL) --sizes 600 2400 10000 40000 --garment skirt --repeats 9 \
 	  --newton --newton-max 2400 --out docs/bench.json
 	$(VENV)/bin/python examples/make_report.py --run $(patsubst %/log.csv,%,$(wildcard $(RUN)/log.csv)) --model $(MODEL) --data $(DATA) \
 	  --results docs/results.json --results-full docs/results_full.json --results-by docs/results_by.json --bench docs/bench.json \
 	  $$([ -f docs/external_default.json ] && echo --external-default docs/external_default.json) \
 	  $$([ -f docs/external_raw.json ] && echo --external-raw docs/external_raw.json) \
-	  $$([ -f docs/external_prior_refine.json ] && echo --external docs/external_prior_refine.json)
+	  $$([ -f docs/external_prior_refine.json ] && echo --external docs/external_prior_refine.json) \
+	  --robustness docs/robustness.json

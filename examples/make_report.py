@@ -1,7 +1,8 @@
 """Write docs/results.md (and its figures) from a trained model's measured results: the model issue's goals, met
 or missed (``garsim.eval.goals``), the training curve, the test / ood tables of `garsim eval --refine --out`, the
 paired-fabric agreement, the external check (API defaults and raw network, from check.py --json), the speed bench,
-error maps of test samples (prior, prediction, ground truth) and an index of the studies in docs/studies/.
+error maps of test samples (prior, prediction, ground truth), the stability, equivariance and rest checks
+(examples/robustness.py --json) and an index of the studies in docs/studies/.
 
 Run: .venv/bin/python examples/make_report.py --run ~/garsim-runs/v1 --data ~/garsim-data/v4test \
     --results docs/results.json --external-default docs/external_default.json \
@@ -21,6 +22,7 @@ from garsim.data.store import DatasetStore
 from garsim.eval.experiments import format_group_table, format_table
 from garsim.eval.goals import format_goals, model_goals, speed_goals
 from garsim.eval.plots import plot_paired_fabrics, plot_training_curve
+from garsim.eval.robustness import CHECKS
 from garsim.geometry.render import render_grid
 
 
@@ -38,6 +40,31 @@ def _external_table(paths: list[Path]) -> str:
                 f"{p.get('euclid_mm', float('nan')):.1f} | "
                 f"{s.get('ratio', float('nan')):.2f} | {p.get('collision_pct', float('nan')):.2f} | "
                 f"{p.get('inside_pct', float('nan')):.2f} | {p.get('edge_crossing_pct', float('nan')):.2f} |"
+            )
+    return "\n".join(lines)
+
+
+def _robustness_section(robustness: dict, path: str) -> str:
+    """Per set of templates and garment type: the largest change under each check and the rest displacement."""
+    model = robustness["model"]
+    sources = " ".join(f"--data {s}" for s in robustness["sets"] if s != robustness.get("external"))
+    external = f" --external {robustness['external']}" if robustness.get("external") else ""
+    checks = list(CHECKS)
+    lines = [
+        "## Stability, equivariance and rest (API defaults)",
+        f"`OMP_NUM_THREADS=1 python examples/robustness.py --model {model} {sources}{external} --json {path}`: the "
+        "largest change (mm) of any output vertex when the input is perturbed and the perturbation undone "
+        "(`garsim.eval.robustness`), and the mean displacement (mm) of each template draped onto its own canonical "
+        "body (worst and mean over the templates).",
+        "",
+        "| templates | garment | n | " + " | ".join(checks) + " | rest, worst | rest, mean |",
+        "|" + "---|" * (len(checks) + 5),
+    ]
+    for source, measured in robustness["sets"].items():
+        for group, s in measured["summary"].items():
+            values = " | ".join(f"{s[c]:.3f}" for c in checks)
+            lines.append(
+                f"| {source} | {group} | {s['n']} | {values} | {s['rest_max_mm']:.2f} | {s['rest_mean_mm']:.2f} |"
             )
     return "\n".join(lines)
 
@@ -70,6 +97,7 @@ def main() -> None:
     parser.add_argument("--external-raw", help="examples/external_check.py --raw --json (the raw network)")
     parser.add_argument("--external", nargs="*", default=[], help="further check.py --json files for the table")
     parser.add_argument("--bench", help="JSON written by `garsim bench --out`")
+    parser.add_argument("--robustness", help="JSON written by examples/robustness.py (stability, equivariance, rest)")
     parser.add_argument("--docs", default="docs")
     args = parser.parse_args()
     docs = Path(args.docs)
@@ -77,6 +105,7 @@ def main() -> None:
     if args.run:
         plot_training_curve([Path(r) / "log.csv" for r in args.run], curve)
     results, bench, full = _load(args.results), _load(args.bench), _load(args.results_full)
+    robustness = _load(args.robustness)
     sim = GarSim.load(args.model) if args.model else GarSim.pretrained()
     store = DatasetStore(args.data)
     by_family: dict[str, list] = {}
@@ -110,7 +139,9 @@ def main() -> None:
         f"# GarSim results\n\nModel: `{results['model']}`; data: `{args.data}` ({results['resolution']} resolution).",
         f"Training curve: `{curve.name}`. Error maps of random test samples: `{maps.name}`.",
         "## Goals of the model issue (raw network unless stated)\n"
-        + format_goals(model_goals(results, _load(args.external_default), _load(args.external_raw), bench, full)),
+        + format_goals(
+            model_goals(results, _load(args.external_default), _load(args.external_raw), bench, full, robustness)
+        ),
     ]
     splits = [split for split in ("test", "ood") if split in results]
     model_arg = f" --model {args.model}" if args.model else ""
@@ -138,6 +169,8 @@ def main() -> None:
             f"{fab['midway_between']:.0%} of the distance and fold checks. Per group: "
             f"`{fab_png.name}`."
         )
+    if robustness:
+        parts.append(_robustness_section(robustness, args.robustness))
     external = [Path(p) for p in (args.external_default, args.external_raw, *args.external) if p]
     if external:
         parts.append("## External check set (`../shared/external-eval/check.py`)\n" + _external_table(external))

@@ -80,6 +80,22 @@ def test_collision_goals_at_the_simulated_resolution_carry_the_truths_own_figure
     )
 
 
+def test_robustness_goals_per_set_of_templates():
+    def summary(stability: float, equivariance: float, rest: float) -> dict:
+        all_ = {"stability_max_mm": stability, "equivariance_max_mm": equivariance, "rest_max_mm": rest}
+        return {"summary": {"all": all_}}
+
+    robustness = {
+        "external": "/x/external-eval/data",
+        "sets": {"tests/fixtures/dataset_v2": summary(0.1, 0.05, 1.3), "/x/external-eval/data": summary(0.7, 0.2, 4.0)},
+    }
+    goals = _by_name(model_goals({}, robustness=robustness))
+    assert goals["dataset_v2: stability, largest change"].met and goals["dataset_v2: rest, worst mean displacement"].met
+    assert goals["external set: stability, largest change"].met is False  # 0.7 > 0.5 mm
+    assert goals["external set: equivariance, largest change"].met
+    assert goals["external set: rest, worst mean displacement"].met is False  # 4 > 3 mm
+
+
 def test_missing_inputs_are_not_measured_never_met():
     goals = model_goals({})
     assert goals and all(g.value is None and g.met is None for g in goals)
@@ -126,6 +142,7 @@ def test_make_report_writes_goals_from_the_committed_results(tmp_path):
     cmd += ["--results", str(ROOT / "docs/results.json"), "--docs", str(docs)]
     cmd += ["--results-full", str(ROOT / "docs/results_full.json")]
     cmd += ["--external-default", str(ROOT / "docs/external_default.json"), "--bench", str(ROOT / "docs/bench.json")]
+    cmd += ["--robustness", str(ROOT / "docs/robustness.json")]
     by = {"by": ["canonical_pose"], "test": evaluate_split(None, FIXTURE, "test", by=("canonical_pose",))}
     (tmp_path / "by.json").write_text(json.dumps(by))
     cmd += ["--results-by", str(tmp_path / "by.json")]
@@ -135,3 +152,4 @@ def test_make_report_writes_goals_from_the_committed_results(tmp_path):
     assert "## test split at the simulated resolution" in report and "test split, full res.:" in report
     assert "- [A study](studies/x.md)" in report and (docs / "test_predictions.png").exists()
     assert "## test split by canonical_pose (raw network)" in report and "| canonical_pose=" in report
+    assert "## Stability, equivariance and rest" in report and "external set: rest, worst mean displacement" in report

@@ -125,16 +125,41 @@ def speed_goals(bench: Results | None) -> list[Goal]:
     ]
 
 
+def robustness_goals(robustness: Results | None) -> list[Goal]:
+    """``examples/robustness.py --json``: per set of templates, the largest change of any output vertex under the
+    stability checks (noise, file round trip, permutations) and the equivariance checks (turns, a 10 m move), and
+    the worst template's mean displacement at rest (target body = canonical body), through the API's defaults."""
+    sets = (robustness or {}).get("sets")
+    if not sets:
+        return [
+            Goal(f"templates: {what}", bound, None, unit=" mm")
+            for what, bound in (("stability", 0.5), ("equivariance", 0.5), ("rest", 3.0))
+        ]
+    goals = []
+    for source, measured in sets.items():
+        label = "external set" if source == robustness.get("external") else source.rstrip("/").rsplit("/", 1)[-1]
+        summary = measured["summary"]["all"]
+        goals += [
+            Goal(f"{label}: stability, largest change", 0.5, summary["stability_max_mm"], unit=" mm"),
+            Goal(f"{label}: equivariance, largest change", 0.5, summary["equivariance_max_mm"], unit=" mm"),
+            Goal(f"{label}: rest, worst mean displacement", 3.0, summary["rest_max_mm"], unit=" mm"),
+        ]
+    return goals
+
+
 def model_goals(
     results: Results,
     external_default: Results | None = None,
     external_raw: Results | None = None,
     bench: Results | None = None,
     full: Results | None = None,
+    robustness: Results | None = None,
 ) -> list[Goal]:
     """Every measurable bound of the model issue's acceptance list, in its order; ``full``: ``garsim eval
-    --resolution full`` results, for the collision bounds at the simulated resolution."""
+    --resolution full`` results, for the collision bounds at the simulated resolution; ``robustness``:
+    ``examples/robustness.py --json``."""
     return [
+        *robustness_goals(robustness),
         *split_goals(results, "test", overall=0.4, family=0.6),
         *split_goals(results, "ood", overall=0.6, family=None),
         *(

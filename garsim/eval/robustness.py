@@ -1,0 +1,189 @@
+"""How a drape through the public API follows its input: the model issue's stability, equivariance and rest
+checks as figures on any set of scenes (the committed fixture, a test split, the external check set).
+
+Each check drapes a scene once as given and once changed, and reports the largest distance (mm) between the two
+outputs at any garment vertex, after undoing the change:
+
+- ``noise``: N(0, 1e-6 m) added to every vertex of the three input meshes;
+- ``obj_round_trip``: the three meshes written with ``save_mesh`` and draped from the files;
+- ``face_permutation``: the garment's faces in a random order;
+- ``vertex_permutation``: the garment's vertices in a random order (the output must follow the permutation);
+- ``turn_37``, ``turn_180``: the whole scene turned about the vertical (z) axis, the output turned back;
+- ``shift_10m``: the whole scene moved 10 m horizontally, the output moved back.
+
+``rest_mm`` is the mean displacement (mm) of the template draped onto its own canonical body (target = canonical):
+a settled garment on a body that does not move should stay.
+"""
+
+from __future__ import annotations
+
+import tempfile
+from collections.abc import Iterable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from garsim.geometry.io import save_mesh
+
+STABILITY_CHECKS: tuple[str, ...] = ("noise", "obj_round_trip", "face_permutation", "vertex_permutation")
+EQUIVARIANCE_CHECKS: tuple[str, ...] = ("turn_37", "turn_180", "shift_10m")
+CHECKS: tuple[str, ...] = STABILITY_CHECKS + EQUIVARIANCE_CHECKS
+NOISE_M = 1e-6
+TURNS_DEG: dict[str, float] = {"turn_37": 37.0, "turn_180": 180.0}
+SHIFT_M = np.array([10.0 / np.sqrt(2.0), -10.0 / np.sqrt(2.0), 0.0])  # 10 m, horizontal
+
+Mesh = tuple[np.ndarray, np.ndarray]
+
+
+@dataclass(frozen=True)
+class Scene:
+    """One drape as a user would ask for it: a template on its canonical body, a target body, a fabric."""
+
+    name: str
+    garment_type: str
+    canonical: Mesh
+    target: Mesh
+    garment: Mesh
+    fabric: Any  # a preset name or a dict of physical values (``GarSim.drape``'s ``fabric``)
+
+
+def turn_about_vertical(vertices: np.ndarray, degrees: float, shift: np.ndarray | None = None) -> np.ndarray:
+    """``vertices`` turned ``degrees`` about the z axis through the origin, then moved by ``shift``."""
+    a = np.radians(degrees)
+    rot = np.array([[np.cos(a), -np.sin(a), 0.0], [np.sin(a), np.cos(a), 0.0], [0.0, 0.0, 1.0]])
+    out = np.asarray(vertices, dtype=np.float64) @ rot.T
+    return out if shift is None else out + shift
+
+
+def _drape(sim: Any, canonical: Any, target: Any, garment: Any, fabric: Any) -> np.ndarray:
+    return np.asarray(sim.drape(canonical, target, garment, fabric=fabric), dtype=np.float64)
+
+
+def _max_mm(a: np.ndarray, b: np.ndarray) -> float:
+    return 1000.0 * float(np.linalg.norm(a - b, axis=1).max())
+
+
+def perturbation_changes(sim: Any, scene: Scene, seed: int = 0) -> dict[str, float]:
+    """The largest change (mm) of any output vertex under each of ``CHECKS``, against the scene draped as given."""
+    rng = np.random.default_rng(seed)
+    can, tgt, (gv, gf) = scene.canonical, scene.target, scene.garment
+    ref = _drape(sim, can, tgt, (gv, gf), scene.fabric)
+    out: dict[str, float] = {}
+    noisy = [(v + rng.normal(0.0, NOISE_M, v.shape), f) for v, f in (can, tgt, (gv, gf))]
+    out["noise"] = _max_mm(_drape(sim, *noisy, scene.fabric), ref)
+    with tempfile.TemporaryDirectory() as tmp:
+        paths = []
+        for name, (v, f) in (("canonical", can), ("target", tgt), ("garment", (gv, gf))):
+            paths.append(str(Path(tmp) / f"{name}.obj"))
+            save_mesh(paths[-1], v, f)
+        out["obj_round_trip"] = _max_mm(_drape(sim, *paths, scene.fabric), ref)
+    faces = gf[rng.permutation(len(gf))]
+    out["face_permutation"] = _max_mm(_drape(sim, can, tgt, (gv, faces), scene.fabric), ref)
+    perm = rng.permutation(len(gv))
+    permuted = _drape(sim, can, tgt, (gv[perm], np.argsort(perm)[gf]), scene.fabric)
+    out["vertex_permutation"] = _max_mm(permuted, ref[perm])
+    for check in EQUIVARIANCE_CHECKS:
+        degrees, shift = (TURNS_DEG[check], None) if check in TURNS_DEG else (0.0, SHIFT_M)
+
+        def move(mesh: Mesh, degrees: float = degrees, shift: np.ndarray | None = shift) -> Mesh:
+            return turn_about_vertical(mesh[0], degrees, shift), mesh[1]
+
+        moved = _drape(sim, move(can), move(tgt), move((gv, gf)), scene.fabric)
+        back = turn_about_vertical(moved - (0.0 if shift is None else shift), -degrees)
+        out[check] = _max_mm(back, ref)
+    return out
+
+
+def rest_displacement_mm(sim: Any, scene: Scene) -> float:
+    """Mean displacement (mm) of the template draped onto its own canonical body."""
+    out = _drape(sim, scene.canonical, scene.canonical, scene.garment, scene.fabric)
+    return 1000.0 * float(np.linalg.norm(out - scene.garment[0], axis=1).mean())
+
+
+def measure(sim: Any, scenes: Iterable[Scene], seed: int = 0) -> dict[str, Any]:
+    """Every check and the rest displacement on each scene, and a summary: the worst scene per check (all scenes
+    and per garment type), the worst and mean rest displacement."""
+    rows = []
+    for i, scene in enumerate(scenes):
+        row: dict[str, Any] = {"name": scene.name, "garment_type": scene.garment_type}
+        row["vertices"] = len(scene.garment[0])
+        row.update(perturbation_changes(sim, scene, seed=seed + i))
+        row["rest_mm"] = rest_displacement_mm(sim, scene)
+        rows.append(row)
+    if not rows:
+        raise ValueError("no scenes to measure")
+    groups = {"all": rows}
+    for row in rows:
+        groups.setdefault(row["garment_type"], []).append(row)
+    summary = {
+        group: {
+            "n": len(members),
+            **{check: max(r[check] for r in members) for check in CHECKS},
+            "stability_max_mm": max(r[c] for r in members for c in STABILITY_CHECKS),
+            "equivariance_max_mm": max(r[c] for r in members for c in EQUIVARIANCE_CHECKS),
+            "rest_max_mm": max(r["rest_mm"] for r in members),
+            "rest_mean_mm": float(np.mean([r["rest_mm"] for r in members])),
+        }
+        for group, members in sorted(groups.items())
+    }
+    return {"rows": rows, "summary": summary}
+
+
+def scenes_from_store(
+    root: str | Path, split: str | None = None, resolution: str | None = None, per_type: int | None = None
+) -> list[Scene]:
+    """One scene per sequence of a garsim dataset folder (the first ``per_type`` of each garment type): its
+    template at ``resolution`` (default: the finest stored, as a user's garment comes) on its canonical body, the
+    first stored target body, its fabric (physical values where it has no preset name)."""
+    from garsim.data.sample import CUSTOM_FABRIC
+    from garsim.data.store import DatasetStore
+
+    scenes: list[Scene] = []
+    for rec in DatasetStore(root).sequences(split):
+        if per_type is not None and sum(s.garment_type == rec.garment_type for s in scenes) >= per_type:
+            continue
+        level = resolution or ("full" if "full" in rec.levels else "low")
+        if level not in rec.levels:
+            raise ValueError(f"{root}: sequence {rec.seq_id} has no {level!r} resolution ({sorted(rec.levels)})")
+        lv = rec.levels[level]
+        values = rec.meta.get("fabric_values")
+        fabric = dict(values) if rec.fabric == CUSTOM_FABRIC and values else rec.fabric
+        scenes.append(
+            Scene(
+                name=rec.seq_id,
+                garment_type=rec.garment_type,
+                canonical=(rec.body_canonical.astype(np.float64), rec.body_faces),
+                target=(rec.body_targets[0].astype(np.float64), rec.body_faces),
+                garment=(lv.template.astype(np.float64), lv.faces),
+                fabric=fabric,
+            )
+        )
+    return scenes
+
+
+def scenes_from_npz(folder: str | Path) -> list[Scene]:
+    """Scenes from a folder of ``*.npz`` drapes (``body_canonical``, ``body_target``, ``garment_template``,
+    ``garment_faces``, ``garment_type``, ``fabric``) sharing the body faces in ``body_faces.npy``, as the
+    external check set stores them."""
+    folder = Path(folder)
+    faces_path = folder / "body_faces.npy"
+    files = sorted(folder.glob("*.npz"))
+    if not files or not faces_path.is_file():
+        raise ValueError(f"{folder}: expected *.npz drapes and body_faces.npy beside them")
+    body_faces = np.load(faces_path, allow_pickle=False)
+    scenes = []
+    for path in files:
+        with np.load(path, allow_pickle=False) as d:
+            scenes.append(
+                Scene(
+                    name=path.stem,
+                    garment_type=str(d["garment_type"]),
+                    canonical=(d["body_canonical"].astype(np.float64), body_faces),
+                    target=(d["body_target"].astype(np.float64), body_faces),
+                    garment=(d["garment_template"].astype(np.float64), d["garment_faces"]),
+                    fabric=str(d["fabric"]),
+                )
+            )
+    return scenes

@@ -1,0 +1,106 @@
+"""garsim.eval.robustness on fake drapers whose answers are computed by hand, and its scene readers."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from garsim.eval.robustness import (
+    CHECKS,
+    Scene,
+    measure,
+    perturbation_changes,
+    rest_displacement_mm,
+    scenes_from_npz,
+    scenes_from_store,
+    turn_about_vertical,
+)
+from garsim.geometry.io import load_mesh
+
+FIXTURE = Path(__file__).parent / "fixtures" / "dataset_v2"
+
+
+class Offset:
+    """Drapes by adding ``offset`` (world frame) plus ``ramp`` x the vertex's index / N: not equivariant to turns
+    when ``offset`` is horizontal, and dependent on the vertex order when ``ramp`` is not zero."""
+
+    def __init__(self, offset=(0.0, 0.0, 0.0), ramp=(0.0, 0.0, 0.0)):
+        self.offset, self.ramp = np.asarray(offset), np.asarray(ramp)
+
+    def drape(self, canonical, target, garment, fabric):
+        v, _ = load_mesh(garment) if isinstance(garment, str) else garment
+        v = np.asarray(v, dtype=np.float64)
+        return v + self.offset + self.ramp * (np.arange(len(v)) / len(v))[:, None]
+
+
+def _scene(n: int = 40) -> Scene:
+    rng = np.random.default_rng(3)
+    strip = np.stack([np.arange(n - 2), np.arange(1, n - 1), np.arange(2, n)], axis=1)  # a triangle strip
+    body = (rng.normal(size=(n, 3)), strip)
+    return Scene("s", "skirt", body, body, (rng.normal(size=(n, 3)), strip), "silk")
+
+
+def test_turn_about_vertical_is_a_rotation_about_z():
+    v = np.array([[1.0, 0.0, 2.0]])
+    np.testing.assert_allclose(turn_about_vertical(v, 90.0), [[0.0, 1.0, 2.0]], atol=1e-12)
+    np.testing.assert_allclose(turn_about_vertical(v, 180.0, np.array([1.0, 1.0, 0.0])), [[0.0, 1.0, 2.0]], atol=1e-12)
+
+
+def test_an_equivariant_order_free_draper_passes_every_check():
+    changes = perturbation_changes(Offset(offset=(0.0, 0.0, -0.01)), _scene())
+    assert set(changes) == set(CHECKS)
+    assert changes["noise"] < 0.01  # 1e-6 m noise: at most a few micrometres
+    assert max(v for k, v in changes.items() if k != "noise") < 1e-3  # the OBJ text: ~0.1 micrometre
+
+
+def test_a_world_frame_offset_is_caught_by_the_turns_by_hand():
+    changes = perturbation_changes(Offset(offset=(0.01, 0.0, 0.0)), _scene())
+    # turned back, a 10 mm offset along x is turned by -37 deg: |R(-37) x - x| = 2 * 10 mm * sin(18.5 deg)
+    assert changes["turn_37"] == pytest.approx(20.0 * np.sin(np.radians(18.5)), rel=1e-6)
+    assert changes["turn_180"] == pytest.approx(20.0, rel=1e-6)
+    assert changes["shift_10m"] < 1e-6 and changes["face_permutation"] < 1e-6
+
+
+def test_an_order_dependent_draper_is_caught_by_the_vertex_permutation():
+    changes = perturbation_changes(Offset(ramp=(0.01, 0.0, 0.0)), _scene(n=40))
+    assert 5.0 < changes["vertex_permutation"] <= 10.0  # the ramp moves some vertex by up to 10 mm x (N-1)/N
+    assert changes["face_permutation"] < 1e-6
+
+
+def test_rest_displacement_and_the_summary_by_hand():
+    sim = Offset(offset=(0.0, 0.0, -0.002))
+    assert rest_displacement_mm(sim, _scene()) == pytest.approx(2.0)
+    out = measure(sim, [_scene(), replace(_scene(), name="t", garment_type="top")])
+    assert [r["name"] for r in out["rows"]] == ["s", "t"]
+    assert set(out["summary"]) == {"all", "skirt", "top"} and out["summary"]["all"]["n"] == 2
+    assert out["summary"]["all"]["rest_max_mm"] == pytest.approx(2.0)
+    assert out["summary"]["all"]["equivariance_max_mm"] < 1e-6
+    with pytest.raises(ValueError, match="no scenes"):
+        measure(sim, [])
+
+
+def test_scenes_from_the_fixture_store_and_from_npz_files(tmp_path):
+    scenes = scenes_from_store(FIXTURE, split="test", per_type=1)
+    assert sorted(s.garment_type for s in scenes) == ["dress", "longsleeve", "skirt", "top", "trousers", "tshirt"]
+    assert all(s.canonical[0].dtype == np.float64 for s in scenes)
+    with pytest.raises(ValueError, match="no 'full' resolution"):
+        scenes_from_store(FIXTURE, resolution="full")
+    s = scenes[0]
+    np.save(tmp_path / "body_faces.npy", s.canonical[1])
+    np.savez(
+        tmp_path / "h000.npz",
+        body_canonical=s.canonical[0].astype(np.float32),
+        body_target=s.target[0].astype(np.float32),
+        garment_template=s.garment[0].astype(np.float32),
+        garment_faces=s.garment[1].astype(np.int32),
+        garment_type=np.array(s.garment_type),
+        fabric=np.array("silk"),
+    )
+    (read,) = scenes_from_npz(tmp_path)
+    assert read.name == "h000" and read.garment_type == s.garment_type and read.fabric == "silk"
+    np.testing.assert_allclose(read.garment[0], s.garment[0], atol=1e-6)
+    with pytest.raises(ValueError, match="body_faces.npy"):
+        scenes_from_npz(tmp_path / "missing")
