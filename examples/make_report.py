@@ -49,6 +49,8 @@ def _robustness_section(robustness: dict, path: str) -> str:
     model = robustness["model"]
     sources = " ".join(f"--data {s}" for s in robustness["sets"] if s != robustness.get("external"))
     external = f" --external {robustness['external']}" if robustness.get("external") else ""
+    if robustness.get("wide_poses") is not None:
+        sources += f" --wide-poses {robustness['wide_poses']}"
     checks = list(CHECKS)
     lines = [
         "## Stability, equivariance and rest (API defaults)",

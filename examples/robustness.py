@@ -24,6 +24,9 @@ def main() -> None:
     parser.add_argument("--data", action="append", default=[], help="a garsim dataset folder (repeatable)")
     parser.add_argument("--split", default=None, help="only this split of --data (default: all)")
     parser.add_argument("--per-type", type=int, default=None, help="at most this many sequences per garment type")
+    parser.add_argument(
+        "--wide-poses", type=int, default=None, help="seed: --data's bodies in poses of the sampler's whole range"
+    )
     parser.add_argument("--external", default=None, help="a folder of external *.npz drapes and body_faces.npy")
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--json", required=True)
@@ -31,7 +34,10 @@ def main() -> None:
     if not args.data and not args.external:
         parser.error("give --data DIR and/or --external DIR")
     sim = GarSim.load(args.model) if args.model else GarSim.pretrained()
-    sources = [(str(d), lambda d=d: scenes_from_store(d, args.split, per_type=args.per_type)) for d in args.data]
+    sources = [
+        (str(d), lambda d=d: scenes_from_store(d, args.split, per_type=args.per_type, wide_poses=args.wide_poses))
+        for d in args.data
+    ]
     if args.external:
         sources.append((str(args.external), lambda: scenes_from_npz(args.external)))
     sets = {}
@@ -43,7 +49,8 @@ def main() -> None:
             f"{source}: {all_['n']} scenes, stability {all_['stability_max_mm']:.3f} mm, equivariance "
             f"{all_['equivariance_max_mm']:.3f} mm, rest {all_['rest_max_mm']:.2f} mm at most"
         )
-    report = {"model": args.model or "garsim/weights", "external": args.external, "sets": sets}
+    report = {"model": args.model or "garsim/weights", "external": args.external, "wide_poses": args.wide_poses}
+    report["sets"] = sets
     atomic_write_bytes(Path(args.json), (json.dumps(report, indent=1) + "\n").encode())
 
 

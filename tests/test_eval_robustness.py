@@ -86,6 +86,9 @@ def test_scenes_from_the_fixture_store_and_from_npz_files(tmp_path):
     scenes = scenes_from_store(FIXTURE, split="test", per_type=1)
     assert sorted(s.garment_type for s in scenes) == ["dress", "longsleeve", "skirt", "top", "trousers", "tshirt"]
     assert all(s.canonical[0].dtype == np.float64 for s in scenes)
+    wide = scenes_from_store(FIXTURE, split="test", per_type=1, wide_poses=7)[0]
+    assert np.abs(wide.target[0] - scenes[0].target[0]).max() > 0.05  # the same body posed anew
+    np.testing.assert_array_equal(wide.canonical[0], scenes[0].canonical[0])
     with pytest.raises(ValueError, match="no 'full' resolution"):
         scenes_from_store(FIXTURE, resolution="full")
     s = scenes[0]

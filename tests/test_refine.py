@@ -68,10 +68,9 @@ def test_stretched_region_comes_back_within_limit(sphere):
     assert np.isfinite(out).all()
 
 
-def test_torn_sheet_gets_the_rounds_it_needs(sphere, monkeypatch):
-    """A sheet torn apart (its right half moved 15 cm: 16x edges) closes to within the simulator's 1.5x bound; with
-    only the ordinary rounds it would stay torn (the rounds alone: without the final clamp)."""
-    monkeypatch.setattr("garsim.refine.CLAMP_PASSES", 0)
+def test_a_torn_sheet_is_closed_by_the_final_clamp(sphere, monkeypatch):
+    """A sheet torn apart (its right half moved 15 cm: 16x edges) ends within the simulator's 1.5x bound: the rounds
+    leave it torn, the final clamp closes it."""
     bv, bf = sphere
     bv = bv + np.array([0.0, 0.0, -1.0])  # obstacle far away
     tpl, f = _grid(30, 0.01)
@@ -79,7 +78,7 @@ def test_torn_sheet_gets_the_rounds_it_needs(sphere, monkeypatch):
     x[tpl[:, 0] > 0, 0] += 0.15
     assert _stretch(x, tpl, f).max() > 15.0
     assert _stretch(refine(x, tpl, f, bv, bf, "cotton"), tpl, f).max() <= TORN_STRETCH
-    monkeypatch.setattr("garsim.refine.MAX_TORN_ROUNDS", MAX_ROUNDS)
+    monkeypatch.setattr("garsim.refine.CLAMP_PASSES", 0)
     assert _stretch(refine(x, tpl, f, bv, bf, "cotton"), tpl, f).max() > TORN_STRETCH
 
 
@@ -325,48 +324,63 @@ def test_fallback_keeps_valid_drapes_pins_symmetry_and_continuity(arm):
         refine(x, tpl, f, bv, bf, "cotton", fallback=tpl[:-1])
 
 
-def test_edges_still_through_after_the_rounds_go_to_the_fallback(monkeypatch):
-    """A real case (tests/fixtures/refine_coarse_dress.npz: the shipped model's raw drape of a coarse 473-vertex test
-    dress, 110 of its 1,345 edges through the body, and its skinning prior): the edges the rounds cannot push off
-    hand their patch to the prior, which leaves under half of them through."""
+def _real_case(name: str):
+    """A committed raw drape of the shipped model (``tests/fixtures/NAME.npz``), its body faces, and refine's
+    arguments."""
+    import json
     from pathlib import Path
 
+    from garsim.garments.fabrics import fabric_from_values
+
     fixtures = Path(__file__).parent / "fixtures"
-    z = np.load(fixtures / "refine_coarse_dress.npz")
+    z = np.load(fixtures / f"{name}.npz")
     bf = np.load(next((fixtures / "dataset_v2" / "body_faces").glob("*.npy")))
+    fabric = str(z["fabric"])
+    fabric = fabric_from_values(json.loads(fabric)) if fabric.startswith("{") else fabric
+    return z, bf, (z["raw"], z["template"], z["faces"], z["body"], bf, fabric)
+
+
+def test_a_coarse_dress_through_the_body_comes_out():
+    """A real case (tests/fixtures/refine_coarse_dress.npz: the shipped model's raw drape of a coarse 473-vertex test
+    dress, 110 of its 1,345 edges through the body, and its skinning prior): the rounds leave no vertex inside and
+    under a quarter of those edges through; pinned vertices stay on the prior."""
+    z, bf, args = _real_case("refine_coarse_dress")
     e = unique_edges(z["faces"])
     tester = InsideTester(z["body"], bf)
 
     def through(x):
         return int(tester.segment_hits(x[e[:, 0]], x[e[:, 1]]).sum())
 
-    kw = {"pinned": z["pinned"], "fallback": z["prior"]}
-    args = (z["raw"], z["template"], z["faces"], z["body"], bf, str(z["fabric"]))
     assert through(z["raw"]) > 100 and through(z["prior"]) <= 2
-    out = refine(*args, **kw)
-    monkeypatch.setattr("garsim.refine._State.through", lambda self: False)
-    without = refine(*args, **kw)
-    assert through(out) <= 0.01 * len(e) and 2 * through(out) < through(without)
+    out = refine(*args, pinned=z["pinned"], fallback=z["prior"])
+    assert through(out) <= 0.02 * len(e) and 4 * through(out) < through(z["raw"])
+    assert not tester.inside(out).any()
     np.testing.assert_array_equal(out[z["pinned"]], z["prior"][z["pinned"]])
+
+
+@pytest.mark.parametrize(
+    "name, bound_mm",
+    [("refine_coarse_dress", 0.5), ("refine_torn_longsleeve", 0.5), ("refine_raised_knee_skirt", 1.0)],
+)
+def test_tiny_input_changes_move_real_tangled_drapes_little(name, bound_mm):
+    """N(0, 1e-6 m) noise on a real tangled raw drape moves its refinement by a fraction of a millimetre (the
+    refinement with longer rounds while an edge was torn and hand-overs to the fallback moved the long-sleeve 27 mm
+    and the skirt with a knee raised into it, torn 6.7x, 22 mm; that skirt now moves ~0.5 mm)."""
+    z, _, args = _real_case(name)
+    out = refine(*args, pinned=z["pinned"], fallback=z["prior"])
+    noisy = z["raw"] + np.random.default_rng(0).normal(0.0, 1e-6, z["raw"].shape)
+    moved = refine(noisy, *args[1:], pinned=z["pinned"], fallback=z["prior"])
+    assert 1000.0 * np.linalg.norm(moved - out, axis=1).max() < bound_mm
 
 
 def test_a_torn_long_sleeve_comes_back_within_the_bound(monkeypatch):
     """A real case (tests/fixtures/refine_torn_longsleeve.npz: the shipped model's raw drape of a 902-vertex test
-    long-sleeve in a custom fabric, torn to 2.6x at the forearm, and its skinning prior): with the widened blend
-    border and repeated hand-overs no edge (rest >= 5 mm, a free end) ends over 1.5x; with the few-ring fade and one
-    hand-over the contacts tear it again (1.9x); both without the final clamp."""
-    import json
-    from pathlib import Path
-
+    long-sleeve in a custom fabric, torn to 2.6x at the forearm, and its skinning prior): no edge (rest >= 5 mm, a free
+    end) ends over 1.5x; before the final clamp, the blend towards the prior has brought the tear under 2.5x (3.8x
+    without the prior as fallback)."""
     from garsim.eval.metrics import constraint_figures
-    from garsim.garments.fabrics import fabric_from_values
 
-    monkeypatch.setattr("garsim.refine.CLAMP_PASSES", 0)
-    fixtures = Path(__file__).parent / "fixtures"
-    z = np.load(fixtures / "refine_torn_longsleeve.npz")
-    bf = np.load(next((fixtures / "dataset_v2" / "body_faces").glob("*.npy")))
-    fabric = fabric_from_values(json.loads(str(z["fabric"])))
-    args = (z["raw"], z["template"], z["faces"], z["body"], bf, fabric)
+    z, bf, args = _real_case("refine_torn_longsleeve")
 
     def worst(x):
         return constraint_figures(x[None], z["template"], z["faces"], z["pinned"], z["body"][None], bf)["max_stretch"]
@@ -375,27 +389,19 @@ def test_a_torn_long_sleeve_comes_back_within_the_bound(monkeypatch):
     out = refine(*args, pinned=z["pinned"], fallback=z["prior"])
     assert worst(out) <= TORN_STRETCH
     np.testing.assert_array_equal(out[z["pinned"]], z["raw"][z["pinned"]])
-    monkeypatch.setattr("garsim.refine.FALLBACK_BORDER", 1e6)
-    monkeypatch.setattr("garsim.refine.HANDOVER_BORDER", 1e6)
-    monkeypatch.setattr("garsim.refine.MAX_HANDOVERS", 1)
-    assert worst(refine(*args, pinned=z["pinned"], fallback=z["prior"])) > 1.7
+    monkeypatch.setattr("garsim.refine.CLAMP_PASSES", 0)
+    assert worst(refine(*args, pinned=z["pinned"], fallback=z["prior"])) < 2.5
+    assert worst(refine(*args, pinned=z["pinned"])) > 3.5
 
 
 def test_a_raised_knee_in_a_torn_skirt_ends_within_the_bound(monkeypatch):
     """A real case (tests/fixtures/refine_raised_knee_skirt.npz: the shipped model's raw drape of a 748-vertex test
     maxi skirt with a knee raised into it, torn to 6.7x, and its skinning prior, torn to 8x, so not blended towards):
-    the contacts leave 1.6x edges against the knee, and the final clamp brings every edge (rest >= 5 mm, a free end)
-    within 1.5x by moving vertices a few millimetres, some of them into the body."""
-    import json
-    from pathlib import Path
-
+    the rounds leave 2.7x edges against the knee, and the final clamp brings every edge (rest >= 5 mm, a free end)
+    within 1.5x by moving vertices up to a few centimetres, some of them into the body."""
     from garsim.eval.metrics import constraint_figures
-    from garsim.garments.fabrics import fabric_from_values
 
-    fixtures = Path(__file__).parent / "fixtures"
-    z = np.load(fixtures / "refine_raised_knee_skirt.npz")
-    bf = np.load(next((fixtures / "dataset_v2" / "body_faces").glob("*.npy")))
-    args = (z["raw"], z["template"], z["faces"], z["body"], bf, fabric_from_values(json.loads(str(z["fabric"]))))
+    z, bf, args = _real_case("refine_raised_knee_skirt")
 
     def figures(x):
         return constraint_figures(x[None], z["template"], z["faces"], z["pinned"], z["body"][None], bf)
@@ -406,8 +412,8 @@ def test_a_raised_knee_in_a_torn_skirt_ends_within_the_bound(monkeypatch):
     assert figures(out)["inside_pct"] < 1.0
     monkeypatch.setattr("garsim.refine.CLAMP_PASSES", 0)
     unclamped = refine(*args, pinned=z["pinned"], fallback=z["prior"])
-    assert figures(unclamped)["max_stretch"] > 1.55
-    assert np.linalg.norm(out - unclamped, axis=1).max() < 0.01  # the clamp moves vertices by millimetres
+    assert figures(unclamped)["max_stretch"] > 2.0
+    assert np.linalg.norm(out - unclamped, axis=1).max() < 0.05  # the clamp moves vertices by centimetres at most
 
 
 def test_stretch_wins_over_contact_past_the_torn_bound(sphere):
@@ -442,37 +448,31 @@ def test_stretch_wins_over_contact_past_the_torn_bound(sphere):
     assert _stretch(out2, tpl2, f2).max() > 1.7  # the triangle's free vertex cannot be within 1.5x of both pins
 
 
-def test_hand_over_rounds_end_once_the_contacts_are_clean(sphere, monkeypatch):
-    """Rounds run while a constraint is violated, at most ``MAX_ROUNDS`` (while nothing is torn); a hand-over's
-    rounds (``contacts_only``) end as soon as no vertex is nearer than the margin and no edge meets the surface:
-    a sheet whose pinned sides are pulled 1.3x apart (an infeasible stretch, under the torn bound) far from the
-    obstacle runs all the ordinary rounds and one hand-over round."""
+def test_rounds_run_until_nothing_is_violated_at_most_max_rounds(sphere, monkeypatch):
+    """A sheet whose pinned sides are pulled 1.3x apart (an infeasible stretch) far from the obstacle runs every round
+    and stays violated; the same sheet at rest runs one round (nothing is violated after it)."""
     import garsim.refine as refine_module
 
     bv, bf = sphere
     bv = bv + np.array([0.0, 0.0, -1.0])  # obstacle far away
     tpl, f = _grid(12, 0.02)
-    x = tpl * np.array([1.3, 1.0, 1.0])
     pinned = np.abs(tpl[:, 0]) > 0.1
-    state = refine_module._State(
-        x, obstacle(bv, bf), refine_module._constraints(tpl, f, pinned, default_max_stretch("cotton")), 0.002
-    )
     sweeps = []
-    monkeypatch.setattr(refine_module._State, "sweep", lambda self, iterations: sweeps.append(iterations))
-    refine_module._rounds(state, 10)
-    assert len(sweeps) == MAX_ROUNDS and state.violated() and not state.violated(stretch=False)
-    sweeps.clear()
-    refine_module._rounds(state, 10, contacts_only=True)
-    assert len(sweeps) == 1
-    torn = refine_module._State(  # pulled 2x apart: torn, so the hand-over rounds go on, longer, to the end
-        tpl * np.array([2.0, 1.0, 1.0]),
-        obstacle(bv, bf),
-        refine_module._constraints(tpl, f, pinned, default_max_stretch("cotton")),
-        0.002,
-    )
-    sweeps.clear()
-    refine_module._rounds(torn, 10, contacts_only=True)
-    assert sweeps == [10] * MAX_ROUNDS + [10 * refine_module.TORN_SWEEPS] * (refine_module.MAX_TORN_ROUNDS - MAX_ROUNDS)
+    real_sweep = refine_module._State.sweep
+
+    def counted(self, iterations):
+        sweeps.append(iterations)
+        real_sweep(self, iterations)
+
+    monkeypatch.setattr(refine_module._State, "sweep", counted)
+    for x, rounds in ((tpl * np.array([1.3, 1.0, 1.0]), MAX_ROUNDS), (tpl * np.array([1.05, 1.0, 1.0]), 1)):
+        state = refine_module._State(
+            x, obstacle(bv, bf), refine_module._constraints(tpl, f, pinned, default_max_stretch("cotton")), 0.002
+        )
+        sweeps.clear()
+        refine_module._rounds(state, 10)
+        assert sweeps == [10] * rounds
+        assert state.violated() == (rounds == MAX_ROUNDS)
 
 
 def test_a_coarse_body_that_the_push_out_clears_keeps_the_patch_off_the_prior():

@@ -132,22 +132,29 @@ def measure(sim: Any, scenes: Iterable[Scene], seed: int = 0) -> dict[str, Any]:
 
 
 def scenes_from_store(
-    root: str | Path, split: str | None = None, resolution: str | None = None, per_type: int | None = None
+    root: str | Path,
+    split: str | None = None,
+    resolution: str | None = None,
+    per_type: int | None = None,
+    wide_poses: int | None = None,
 ) -> list[Scene]:
     """One scene per sequence of a garsim dataset folder (the first ``per_type`` of each garment type): its
     template at ``resolution`` (default: the finest stored, as a user's garment comes) on its canonical body, the
-    first stored target body, its fabric (physical values where it has no preset name)."""
+    first stored target body, its fabric (physical values where it has no preset name). ``wide_poses`` (a seed):
+    the target is instead the sequence's body in a pose of the sampler's whole range (``JointLimits()``), where the
+    network's drape is often tangled with the body: a stress test of the post-process."""
     from garsim.data.sample import CUSTOM_FABRIC
     from garsim.data.store import DatasetStore
 
     scenes: list[Scene] = []
-    for rec in DatasetStore(root).sequences(split):
+    for k, rec in enumerate(DatasetStore(root).sequences(split)):
         if per_type is not None and sum(s.garment_type == rec.garment_type for s in scenes) >= per_type:
             continue
         level = resolution or ("full" if "full" in rec.levels else "low")
         if level not in rec.levels:
             raise ValueError(f"{root}: sequence {rec.seq_id} has no {level!r} resolution ({sorted(rec.levels)})")
         lv = rec.levels[level]
+        target = rec.body_targets[0] if wide_poses is None else _wide_pose(rec, wide_poses + k)
         values = rec.meta.get("fabric_values")
         fabric = dict(values) if rec.fabric == CUSTOM_FABRIC and values else rec.fabric
         scenes.append(
@@ -155,12 +162,25 @@ def scenes_from_store(
                 name=rec.seq_id,
                 garment_type=rec.garment_type,
                 canonical=(rec.body_canonical.astype(np.float64), rec.body_faces),
-                target=(rec.body_targets[0].astype(np.float64), rec.body_faces),
+                target=(target.astype(np.float64), rec.body_faces),
                 garment=(lv.template.astype(np.float64), lv.faces),
                 fabric=fabric,
             )
         )
     return scenes
+
+
+def _wide_pose(rec: Any, seed: int) -> np.ndarray:
+    """The body of a dataset sequence (its phenotype) in a pose of the sampler's whole range."""
+    from garsim.bodies.anny import AnnyBody
+    from garsim.bodies.poses import PoseSampler
+
+    if "phenotype" not in rec.meta:
+        raise ValueError(f"sequence {rec.seq_id} stores no phenotype: its body cannot be posed anew")
+    body = AnnyBody(rec.meta["phenotype"])
+    if len(body.faces) != len(rec.body_faces):
+        raise ValueError(f"sequence {rec.seq_id}: its body is not Anny's topology")
+    return body.pose(PoseSampler(seed=seed, body=body).sample(1)[0]).vertices
 
 
 def scenes_from_npz(folder: str | Path) -> list[Scene]:
