@@ -522,12 +522,11 @@ def _kernels() -> SimpleNamespace:
         ring: wp.array(dtype=wp.float64),
         previous: wp.array(dtype=wp.vec3d),
         out: wp.array(dtype=wp.int32),
-        edge_depth_from: wp.float64,
         border: wp.float64,
     ):
         """(e), one thread: the fallback weight ``w`` of :func:`fallback_weight` from the seeds of
         :func:`fallback_seed` (a deep vertex with its closest point's normal ``normal_q``; an edge through the
-        obstacle, counted from ``edge_depth_from``, at its deepest sample), then x += w * mobile * (prior - x);
+        obstacle, counted from ``FALLBACK_DEPTH``, at its deepest sample), then x += w * mobile * (prior - x);
         out[1] = 1 if a vertex moved."""
         n = x.shape[0]
         out[1] = 0
@@ -540,7 +539,7 @@ def _kernels() -> SimpleNamespace:
                 seeded = 1
         for e in range(hit.shape[0]):
             if hit[e] == 1:
-                v = ramp((-edge_depth[e] - edge_depth_from) / f64(FALLBACK_RAMP))
+                v = ramp((-edge_depth[e] - f64(FALLBACK_DEPTH)) / f64(FALLBACK_RAMP))
                 if v > f64(0.0):
                     a = sample_edges[e, 0]
                     b = sample_edges[e, 1]
@@ -866,7 +865,7 @@ class _State:
                 [x, d, con.wp_moving, buf["hit"], buf["s_depth"], buf["s_deep_normal"], buf["s_deep_t"], buf["nq"]]
                 + [con.wp_stretch, con.wp_rest, con.wp_edges]
                 + [con.wp_closed_inv_degree, con.wp_mobile, buf["prior"], buf["w"], buf["ring"], buf["previous"]]
-                + [buf["flag"], FALLBACK_DEPTH, FALLBACK_BORDER],
+                + [buf["flag"], FALLBACK_BORDER],
             ),
             diffuse=record(
                 k.diffuse, 1, [0.0, x, buf["x0"], con.wp_edges, con.wp_mobile, con.wp_inv_degree, buf["ring3"]]
@@ -901,16 +900,13 @@ class _State:
         self.cmd.diffuse.set_param_by_name("alpha", float(alpha))
         self.cmd.diffuse.launch()
 
-    def fall_back(
-        self, prior: np.ndarray, edge_depth_from: float = FALLBACK_DEPTH, border: float = FALLBACK_BORDER
-    ) -> np.ndarray | None:
+    def fall_back(self, prior: np.ndarray, border: float = FALLBACK_BORDER) -> np.ndarray | None:
         """Blend the mobile vertices that are deep inside the obstacle, on an edge deep through it (deeper than
-        ``edge_depth_from``) or on a torn edge towards ``prior``, the fade widened to keep edges within ``border`` x
+        ``FALLBACK_DEPTH``) or on a torn edge towards ``prior``, the fade widened to keep edges within ``border`` x
         their rest length (the ``fallback_blend`` kernel; :func:`fallback_weight` is its reference once each vertex's
         ``d`` is lowered to the depth of the deepest edge through the body at it); returns the blended garment, or
         None (nothing moved)."""
         self.buf["prior"].numpy()[:] = prior
-        self.cmd.fallback.set_param_by_name("edge_depth_from", float(edge_depth_from))
         self.cmd.fallback.set_param_by_name("border", float(border))
         self.cmd.fallback.launch()
         if not self.buf["flag"].numpy()[1]:
@@ -1148,7 +1144,7 @@ def refine(
         return np.array(x_in, dtype=out_dtype)
 
     if fb is not None:
-        blended = state.fall_back(fb - origin, FALLBACK_DEPTH, FALLBACK_BORDER)
+        blended = state.fall_back(fb - origin)
         if blended is not None:
             x0 = blended
     _rounds(state, iterations, x0, smoothing_weight(fab, state.con.mean_edge))

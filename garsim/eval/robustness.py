@@ -18,6 +18,7 @@ a settled garment on a body that does not move should stay.
 from __future__ import annotations
 
 import tempfile
+from collections import Counter
 from collections.abc import Iterable
 from dataclasses import dataclass
 from pathlib import Path
@@ -114,7 +115,7 @@ def measure(sim: Any, scenes: Iterable[Scene], seed: int = 0) -> dict[str, Any]:
         rows.append(row)
     if not rows:
         raise ValueError("no scenes to measure")
-    groups = {"all": rows}
+    groups = {"all": list(rows)}
     for row in rows:
         groups.setdefault(row["garment_type"], []).append(row)
     summary = {
@@ -146,10 +147,14 @@ def scenes_from_store(
     from garsim.data.sample import CUSTOM_FABRIC
     from garsim.data.store import DatasetStore
 
+    store = DatasetStore(root)
     scenes: list[Scene] = []
-    for k, rec in enumerate(DatasetStore(root).sequences(split)):
-        if per_type is not None and sum(s.garment_type == rec.garment_type for s in scenes) >= per_type:
-            continue
+    taken: Counter[str] = Counter()
+    for k, entry in enumerate(store.entries()):
+        if (split is not None and entry["split"] != split) or taken[entry["garment_type"]] == per_type:
+            continue  # read only the sequences it keeps
+        taken[entry["garment_type"]] += 1
+        rec = store.read_sequence(entry)
         level = resolution or ("full" if "full" in rec.levels else "low")
         if level not in rec.levels:
             raise ValueError(f"{root}: sequence {rec.seq_id} has no {level!r} resolution ({sorted(rec.levels)})")
