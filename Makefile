@@ -49,7 +49,7 @@ results: $(STAMP)
 	  $(VENV)/bin/python examples/external_check.py --model $(MODEL) --raw --json docs/external_raw.json && \
 	  $(VENV)/bin/python examples/external_check.py --prior-only --refine --json docs/external_prior_refine.json; fi
 	$(VENV)/bin/python examples/robustness.py --model $(MODEL) --data tests/fixtures/dataset_v2 --data $(DATA) --split test \
-	  --per-type 10 $$([ -f $(EXTERNAL) ] && echo --external $(dir $(EXTERNAL))data) --json docs/robustness.json
+	  --per-type 10 --noise-draws 3 $$([ -f $(EXTERNAL) ] && echo --external $(dir $(EXTERNAL))data) --json docs/robustness.json
 	$(VENV)/bin/garsim bench --model $(MODEL) --sizes 600 2400 10000 40000 --garment skirt --repeats 9 \
 	  --newton --newton-max 2400 --out docs/bench.json
 	$(VENV)/bin/python examples/make_report.py --run $(patsubst %/log.csv,%,$(wildcard $(RUN)/log.csv)) --model $(MODEL) --data $(DATA) \

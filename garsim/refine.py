@@ -35,32 +35,37 @@ gets wrong and a viewer notices, and leaves everything else exactly where the ne
     cycle this is what brings the sleeves' armpits and cuffs within the bounds (t-shirt max stretch 5.9 -> 1.1,
     long-sleeve 3.7 -> 1.2). A valid drape has nothing that deep or torn, so this never moves it.
 
-Algorithm: position-based dynamics with Jacobi sweeps (order-independent, so the result does not
-depend on vertex order), averaged by the number of active constraints per vertex (counted smoothly: a
-constraint counts fully once violated by 1 % of its limit, so the result is continuous in the input) and
-accelerated by the Chebyshev semi-iterative method (Wang 2015, "A Chebyshev semi-iterative approach for
-accelerating projective and position-based dynamics"; the momentum fades out near a contact). Contacts
-are linearised as half-spaces (closest point c, outward unit normal n: n.(x - c) >= margin) from exact
-closest-point queries, refreshed after every ``iterations`` sweeps (a round) for the vertices that moved
-near the surface; rounds repeat until nothing is violated, at most ``MAX_ROUNDS`` (a fixed budget: a
-prediction tangled with the body is improved, not solved); a final exact contact projection guarantees the margin
-(contact wins over stretch where they conflict), except past the simulator's rejection bound: a last clamp shortens
-the edges still over ``TORN_STRETCH`` x their rest length to it (Jacobi passes, by as much as they need), so no edge
-with a free end that can be shortened leaves over that bound, even where that leaves a vertex nearer than the margin
-or inside (an edge that no move can shorten, at a free vertex between pins pulled apart, stays as it is).
+Algorithm: position-based dynamics with Jacobi sweeps (order-independent, so the result does not depend on vertex
+order), each vertex's corrections averaged with their own lengths as weights (sum c |c| / sum |c|: a constraint alone
+moves its vertex in full, one that has just become violated counts as little as it moves it, and the average is
+Lipschitz in the state, where a count of the active constraints, even one ramped in over 1 % of the limit, multiplied
+the sensitivity of a torn neighbour's correction by ~20) and accelerated by the Chebyshev semi-iterative method (Wang
+2015, "A Chebyshev semi-iterative approach for accelerating projective and position-based dynamics"; the momentum fades
+out near a contact). Contacts are linearised as half-spaces (closest point c, outward unit normal n: n.(x - c) >=
+margin) from exact closest-point queries, refreshed after every ``iterations`` sweeps (a round) for the vertices that
+moved near the surface; rounds repeat until nothing is violated, at most ``MAX_ROUNDS`` (a fixed budget: a prediction
+tangled with the body is improved, not solved); a final exact contact projection guarantees the margin (contact wins
+over stretch where they conflict), except past the simulator's rejection bound: a last clamp shortens the edges still
+over ``TORN_STRETCH`` x their rest length to it (Jacobi passes, by as much as they need), so no edge with a free end
+that can be shortened leaves over that bound, even where that leaves a vertex nearer than the margin or inside (an edge
+that no move can shorten, at a free vertex between pins pulled apart, stays as it is).
 
-Continuity: no step is taken or skipped on a threshold of the state except at a fixed point (the rounds end early
-only when nothing is violated, where more sweeps would not move anything), and every weight starts from 0 (the
-fallback's seeds, the constraints' counts, an edge sample's clearance, ``SAMPLE_RAMP``), so a tiny change of the
-input changes the result a little (``garsim.eval.robustness``). Two stages that this rule removed moved tangled drapes
-by tens of millimetres under 1e-6 m of input noise: longer rounds while an edge stayed torn, until it was not, and
-hand-overs to the fallback of the patches of edges still through the body after the rounds, seeded in full from
-the surface on. Without them, an edge sample's clearance ramped and the obstacle centred, the largest change under
-the robustness checks fell from 293 to 6.7 mm on 60 of our own templates in the pose sampler's wide range, and from
-17.0 to 0.70 mm on the external set, with the same stretch and collision figures on our own data and a worse worst
-case on the external set's torn trousers (``docs/studies/refine_continuity.md``). What still jumps: a vertex inside
-the body where two parts nearly meet (crotch, armpit), whose closest surface point changes sides, and the Chebyshev
-step's gain in tangled regions (without it 1.5 mm at most on those templates, but worse stretch and error).
+Continuity: no step is taken or skipped on a threshold of the state except at a fixed point (the rounds end early only
+when nothing is violated, where more sweeps would not move anything), and every weight starts from 0 (the fallback's
+seeds, a constraint's weight in the average, an edge sample's clearance, ``SAMPLE_RAMP``), so a tiny change of the input
+changes the result a little (``garsim.eval.robustness``). Two stages that this rule removed moved tangled drapes by tens
+of millimetres under 1e-6 m of input noise: longer rounds while an edge stayed torn, until it was not, and hand-overs to
+the fallback of the patches of edges still through the body after the rounds, seeded in full from the surface on.
+Without them, an edge sample's clearance ramped and the obstacle centred, the largest change under the robustness checks
+fell from 293 to 6.7 mm on 60 of our own templates in the pose sampler's wide range, and from 17.0 to 0.70 mm on the
+external set (``docs/studies/refine_continuity.md``). Averaging the corrections by their lengths instead of by a count
+then brought the median scene's largest change from 0.09 to 0.02 mm on the external set and from 0.18 to 0.04 mm on
+those wide poses, and the scenes over 0.5 mm from 8 to 2 and from 20 to 8 (three noise draws each;
+``docs/studies/refine_averaging.md``), with the same or better stretch, collision and error figures. What still jumps,
+in drapes tangled with the body: a vertex inside the body whose closest surface point changes sides, where two parts
+nearly meet (crotch, armpit) or across a ridge of the faceted body (its contact normal turns by the ridge's angle), and
+the Chebyshev step's gain, which carries such a jump over the sweeps (the external set's trousers with a leg through
+them: 2.5 mm at most).
 
 Closest point on the obstacle (``garsim.geometry.inside.Obstacle``, the one exact query garsim has): a
 warp BVH over the obstacle's triangles (float32) finds each point's
@@ -183,7 +188,6 @@ CLAMP_RHO = 0.99
 least-excess iterate is kept, so an oscillation costs passes, not the result)."""
 _STRETCH_TOL = 1e-3  # relative: an edge within limit * (1 + this) counts as satisfied
 _DIST_TOL = 1e-6  # m
-_RAMP = 0.01  # a constraint counts fully in the averaging once violated by this x its limit (x BAND for samples)
 _DEVICE = "cpu"
 
 
@@ -408,8 +412,9 @@ def _kernels() -> SimpleNamespace:
         previous: wp.array(dtype=wp.vec3d),
         chebyshev: wp.array(dtype=wp.float64),
     ):
-        """``iterations`` Jacobi sweeps (one thread, launched with dim 1): (a) stretch, averaged and
-        over-relaxed; (c) edge-sample half-spaces, averaged; (b) vertex half-spaces, projected; with ``rho``
+        """``iterations`` Jacobi sweeps (one thread, launched with dim 1): (a) stretch, averaged (weighted by the
+        corrections' lengths) and over-relaxed; (c) edge-sample half-spaces, averaged alike; (b) vertex half-spaces,
+        projected; with ``rho``
         > 0 each sweep ends with the Chebyshev semi-iterative step (Wang 2015) from the iterate before
         (``chebyshev``: the last weight and the number of sweeps so far)."""
         n = x.shape[0]
@@ -424,15 +429,15 @@ def _kernels() -> SimpleNamespace:
                 length2 = wp.dot(dx, dx)
                 if length2 > limit[e] * limit[e]:
                     length = wp.sqrt(length2)
-                    corr = (length - limit[e]) / (length * (mobile[i] + mobile[j])) * dx
-                    weight = wp.min((length - limit[e]) / (f64(_RAMP) * limit[e]), f64(1.0))
-                    acc[i] = acc[i] + mobile[i] * corr
-                    cnt[i] = cnt[i] + mobile[i] * weight
-                    acc[j] = acc[j] - mobile[j] * corr
-                    cnt[j] = cnt[j] + mobile[j] * weight
+                    size = (length - limit[e]) / (mobile[i] + mobile[j])
+                    corr = size / length * dx
+                    acc[i] = acc[i] + mobile[i] * size * corr
+                    cnt[i] = cnt[i] + mobile[i] * size
+                    acc[j] = acc[j] - mobile[j] * size * corr
+                    cnt[j] = cnt[j] + mobile[j] * size
             for i in range(n):
                 if cnt[i] > f64(0.0):
-                    x[i] = x[i] + relax * acc[i] / wp.max(cnt[i], f64(1.0))
+                    x[i] = x[i] + relax * acc[i] / cnt[i]
                     acc[i] = wp.vec3d()
                     cnt[i] = f64(0.0)
             for m in range(count[0]):
@@ -448,11 +453,10 @@ def _kernels() -> SimpleNamespace:
                 depth = clearance[e] - wp.dot((f64(1.0) - t) * x[i] + t * x[j] - s_close[e, k], nrm)
                 if depth > f64(0.0) and den > f64(0.0):
                     lam = depth / den
-                    weight = wp.min(depth / (f64(_RAMP) * f64(BAND)), f64(1.0))
-                    acc[i] = acc[i] + wi * lam * nrm
-                    cnt[i] = cnt[i] + mobile[i] * weight
-                    acc[j] = acc[j] + wj * lam * nrm
-                    cnt[j] = cnt[j] + mobile[j] * weight
+                    acc[i] = acc[i] + (wi * lam) * (wi * lam) * nrm
+                    cnt[i] = cnt[i] + wi * lam
+                    acc[j] = acc[j] + (wj * lam) * (wj * lam) * nrm
+                    cnt[j] = cnt[j] + wj * lam
             w = f64(1.0)
             if rho > f64(0.0):
                 if chebyshev[1] == f64(1.0):
@@ -464,7 +468,7 @@ def _kernels() -> SimpleNamespace:
             for i in range(n):
                 xi = x[i]
                 if cnt[i] > f64(0.0):
-                    xi = xi + acc[i] / wp.max(cnt[i], f64(1.0))
+                    xi = xi + acc[i] / cnt[i]
                     acc[i] = wp.vec3d()
                     cnt[i] = f64(0.0)
                 if w != f64(1.0):  # less momentum nearer a contact (continuous in the distance)
@@ -924,12 +928,12 @@ class _State:
 
     def clamp_torn(self) -> None:
         """Shorten every edge with a free end longer than (1 - ``_STRETCH_TOL`` / 2) x ``TORN_STRETCH`` x its rest
-        length (and its own limit) to just within it: averaged Jacobi projections of those edges (each counted
-        smoothly, as in the sweeps), after ``CLAMP_PLAIN`` plain passes with a Chebyshev step (``CLAMP_RHO``; no
-        momentum fade: contacts play no part here), until every edge is within, or the total excess has not fallen for
-        ``CLAMP_PATIENCE`` passes (an edge no move can shorten: a free vertex between pins pulled apart), at most
-        ``CLAMP_PASSES``; keeps the iterate of least total excess. Stretch wins over contact past the simulator's
-        rejection bound, by as much as it needs (millimetres on the test split's torn skirt)."""
+        length (and its own limit) to just within it: averaged Jacobi projections of those edges (weighted by the
+        corrections' lengths, as in the sweeps), after ``CLAMP_PLAIN`` plain passes with a Chebyshev step
+        (``CLAMP_RHO``; no momentum fade: contacts play no part here), until every edge is within, or the total excess
+        has not fallen for ``CLAMP_PATIENCE`` passes (an edge no move can shorten: a free vertex between pins pulled
+        apart), at most ``CLAMP_PASSES``; keeps the iterate of least total excess. Stretch wins over contact past the
+        simulator's rejection bound, by as much as it needs (millimetres on the test split's torn skirt)."""
         if not self.torn(1.0 - 0.5 * _STRETCH_TOL):
             return
         x, con = self.x, self.con
@@ -950,14 +954,15 @@ class _State:
                 break
             over = length > target
             eo, lo, to = e[over], length[over], target[over]
-            corr = ((lo - to) / (lo * (mob[eo[:, 0]] + mob[eo[:, 1]])))[:, None] * dx[over]
-            weight = np.minimum((lo - to) / (_RAMP * to), 1.0)
+            size = (lo - to) / (mob[eo[:, 0]] + mob[eo[:, 1]])  # each mobile end's share of the shortening
+            corr = (size / lo)[:, None] * dx[over]
             step, count = np.zeros((n, 3)), np.zeros(n)
             for end, sign in ((0, 1.0), (1, -1.0)):
+                weight = mob[eo[:, end]] * size
                 for c in range(3):
-                    step[:, c] += np.bincount(eo[:, end], weights=sign * mob[eo[:, end]] * corr[:, c], minlength=n)
+                    step[:, c] += np.bincount(eo[:, end], weights=sign * weight * corr[:, c], minlength=n)
                 count += np.bincount(eo[:, end], weights=weight, minlength=n)
-            step /= np.maximum(count, 1.0)[:, None]
+            step /= np.where(count > 0.0, count, 1.0)[:, None]
             j = k - CLAMP_PLAIN + 1  # plain passes first (a slightly torn drape closes in them, moved least)
             w = 1.0 if j <= 0 else 2.0 / (2.0 - CLAMP_RHO**2) if j == 1 else 4.0 / (4.0 - CLAMP_RHO**2 * w)
             x_new = previous + w * (x + step - previous)

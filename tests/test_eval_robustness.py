@@ -70,6 +70,23 @@ def test_an_order_dependent_draper_is_caught_by_the_vertex_permutation():
     assert changes["face_permutation"] < 1e-6
 
 
+def test_the_noise_check_takes_the_largest_change_over_its_draws():
+    """The identity draper moves a vertex exactly as much as the noise does: the check is the largest noise vector's
+    length over the draws (the first draw is the single-draw check's own), in micrometres here."""
+    sim = Offset()
+    one = perturbation_changes(sim, _scene(), seed=5)["noise"]
+    three = perturbation_changes(sim, _scene(), seed=5, noise_draws=3)["noise"]
+    rng = np.random.default_rng(5)
+    sizes = []
+    for _ in range(3):
+        draws = [rng.normal(0.0, 1e-6, (40, 3)) for _ in range(3)]  # canonical, target, garment: the garment's counts
+        sizes.append(1000.0 * np.linalg.norm(draws[2], axis=1).max())
+    assert one == pytest.approx(sizes[0]) and three == pytest.approx(max(sizes)) and three >= one
+    for bad in (0, 1.5, True):
+        with pytest.raises(ValueError, match="noise_draws"):
+            perturbation_changes(sim, _scene(), noise_draws=bad)
+
+
 def test_rest_displacement_and_the_summary_by_hand():
     sim = Offset(offset=(0.0, 0.0, -0.002))
     assert rest_displacement_mm(sim, _scene()) == pytest.approx(2.0)
