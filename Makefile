@@ -5,7 +5,7 @@ VENV := .venv
 TORCH_PIP_ARGS ?=
 STAMP := $(VENV)/.installed
 
-.PHONY: setup demo lint test test-all results
+.PHONY: setup demo lint test test-all data results
 
 $(STAMP): pyproject.toml
 	test -d $(VENV) || $(PYTHON) -m venv $(VENV)
@@ -28,6 +28,17 @@ test: $(STAMP)
 
 test-all: $(STAMP)
 	$(VENV)/bin/python -m pytest -q -m ""
+
+# The v5 dataset (issue 8): the training folder and the test / ood folder generated side by side, one worker each,
+# each resumable (rerun after an interruption: finished jobs are kept, a mismatched setting is refused). Hours of CPU:
+#   nohup make data > ~/garsim-data/generate.log 2>&1 &
+DATA_ROOT ?= $(HOME)/garsim-data
+GENERATE := $(VENV)/bin/garsim data generate --seed 0 --workers 1 --strap-pins crest
+data: $(STAMP)
+	mkdir -p $(DATA_ROOT)
+	$(GENERATE) --out $(DATA_ROOT)/v5 --train 1800 --test 0 --ood 0 & \
+	$(GENERATE) --out $(DATA_ROOT)/v5test --train 0 --test 260 --ood 64 & \
+	wait
 
 # The results report (docs/results.md and its figures) from the dataset, the model and its training run (when
 # RUN exists; otherwise docs/training_curve.png is kept):
