@@ -407,7 +407,7 @@ def _kernels() -> SimpleNamespace:
         v_normal: wp.array(dtype=wp.vec3d),
         d: wp.array(dtype=wp.float64),
         acc: wp.array(dtype=wp.vec3d),
-        cnt: wp.array(dtype=wp.float64),
+        wsum: wp.array(dtype=wp.float64),
         current: wp.array(dtype=wp.vec3d),
         previous: wp.array(dtype=wp.vec3d),
         chebyshev: wp.array(dtype=wp.float64),
@@ -432,14 +432,14 @@ def _kernels() -> SimpleNamespace:
                     size = (length - limit[e]) / (mobile[i] + mobile[j])
                     corr = size / length * dx
                     acc[i] = acc[i] + mobile[i] * size * corr
-                    cnt[i] = cnt[i] + mobile[i] * size
+                    wsum[i] = wsum[i] + mobile[i] * size
                     acc[j] = acc[j] - mobile[j] * size * corr
-                    cnt[j] = cnt[j] + mobile[j] * size
+                    wsum[j] = wsum[j] + mobile[j] * size
             for i in range(n):
-                if cnt[i] > f64(0.0):
-                    x[i] = x[i] + relax * acc[i] / cnt[i]
+                if wsum[i] > f64(0.0):
+                    x[i] = x[i] + relax * acc[i] / wsum[i]
                     acc[i] = wp.vec3d()
-                    cnt[i] = f64(0.0)
+                    wsum[i] = f64(0.0)
             for m in range(count[0]):
                 e = listed[m] // ts.shape[0]
                 k = listed[m] % ts.shape[0]
@@ -454,9 +454,9 @@ def _kernels() -> SimpleNamespace:
                 if depth > f64(0.0) and den > f64(0.0):
                     lam = depth / den
                     acc[i] = acc[i] + (wi * lam) * (wi * lam) * nrm
-                    cnt[i] = cnt[i] + wi * lam
+                    wsum[i] = wsum[i] + wi * lam
                     acc[j] = acc[j] + (wj * lam) * (wj * lam) * nrm
-                    cnt[j] = cnt[j] + wj * lam
+                    wsum[j] = wsum[j] + wj * lam
             w = f64(1.0)
             if rho > f64(0.0):
                 if chebyshev[1] == f64(1.0):
@@ -467,10 +467,10 @@ def _kernels() -> SimpleNamespace:
                 chebyshev[1] = chebyshev[1] + f64(1.0)
             for i in range(n):
                 xi = x[i]
-                if cnt[i] > f64(0.0):
-                    xi = xi + acc[i] / cnt[i]
+                if wsum[i] > f64(0.0):
+                    xi = xi + acc[i] / wsum[i]
                     acc[i] = wp.vec3d()
-                    cnt[i] = f64(0.0)
+                    wsum[i] = f64(0.0)
                 if w != f64(1.0):  # less momentum nearer a contact (continuous in the distance)
                     near = wp.clamp((d[i] - margin) / f64(BAND), f64(0.0), f64(1.0))
                     xi = xi + near * (w - f64(1.0)) * (xi - previous[i])
@@ -680,7 +680,8 @@ class _Constraints:
 
 def _buffers(n: int, samples: tuple[int, int]) -> dict[str, Any]:
     """The refinement's working arrays for a garment of ``n`` vertices and ``samples`` edge samples,
-    allocated once and reused by every call on that garment (the sweeps leave ``acc`` and ``cnt`` zero)."""
+    allocated once and reused by every call on that garment (the sweeps leave ``acc`` and ``wsum``, the weighted
+    corrections and the sum of their weights, zero)."""
     wp = quiet_warp()
     kinds = {
         "x": (n, wp.vec3d),
@@ -693,7 +694,7 @@ def _buffers(n: int, samples: tuple[int, int]) -> dict[str, Any]:
         "xs": (n, wp.vec3d),
         "fresh": (n, wp.int32),
         "acc": (n, wp.vec3d),
-        "cnt": (n, wp.float64),
+        "wsum": (n, wp.float64),
         "current": (n, wp.vec3d),
         "previous": (n, wp.vec3d),
         "hit": (samples[0], wp.int32),
@@ -850,7 +851,7 @@ class _State:
         sweeps = [0, RELAXATION, CHEBYSHEV_RHO, margin, buf["s_clearance"], x, con.wp_mobile, con.wp_stretch]
         sweeps += [con.wp_limit]
         sweeps += [con.wp_moving, con.wp_ts, *listed, buf["s_close"], buf["s_normal"], buf["v_active"]]
-        sweeps += [buf[name] for name in ("cq", "nq", "d", "acc", "cnt", "current", "previous", "chebyshev")]
+        sweeps += [buf[name] for name in ("cq", "nq", "d", "acc", "wsum", "current", "previous", "chebyshev")]
         cmd = SimpleNamespace(
             vertex=record(k.vertex_state, n, [*obs.inputs, *vertex]),
             samples=record(k.sample_state, ne, [*obs.inputs, *samples]) if ne else None,
@@ -956,13 +957,13 @@ class _State:
             eo, lo, to = e[over], length[over], target[over]
             size = (lo - to) / (mob[eo[:, 0]] + mob[eo[:, 1]])  # each mobile end's share of the shortening
             corr = (size / lo)[:, None] * dx[over]
-            step, count = np.zeros((n, 3)), np.zeros(n)
+            step, total = np.zeros((n, 3)), np.zeros(n)
             for end, sign in ((0, 1.0), (1, -1.0)):
                 weight = mob[eo[:, end]] * size
                 for c in range(3):
                     step[:, c] += np.bincount(eo[:, end], weights=sign * weight * corr[:, c], minlength=n)
-                count += np.bincount(eo[:, end], weights=weight, minlength=n)
-            step /= np.where(count > 0.0, count, 1.0)[:, None]
+                total += np.bincount(eo[:, end], weights=weight, minlength=n)
+            step /= np.where(total > 0.0, total, 1.0)[:, None]
             j = k - CLAMP_PLAIN + 1  # plain passes first (a slightly torn drape closes in them, moved least)
             w = 1.0 if j <= 0 else 2.0 / (2.0 - CLAMP_RHO**2) if j == 1 else 4.0 / (4.0 - CLAMP_RHO**2 * w)
             x_new = previous + w * (x + step - previous)
