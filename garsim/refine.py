@@ -201,6 +201,12 @@ def _kernels() -> SimpleNamespace:
     f64 = wp.float64
     signed_closest = surface_funcs().signed_closest  # the shared exact query (garsim.geometry.inside)
 
+    @wp.func
+    def ramp(t: wp.float64) -> wp.float64:
+        """smoothstep: 3t^2 - 2t^3 of t clipped to [0, 1] (as garsim.geometry.proximity.smoothstep)."""
+        u = wp.clamp(t, f64(0.0), f64(1.0))
+        return u * u * (f64(3.0) - f64(2.0) * u)
+
     @wp.kernel(enable_backward=False, module="unique")
     def vertex_state(
         mesh: wp.uint64,
@@ -310,8 +316,7 @@ def _kernels() -> SimpleNamespace:
                 inside = inside - f64(r.t)  # ... to its last exit
             reach = f64(0.5) * wp.max(inside, f64(0.0)) * length
         hit[e] = 1
-        u = wp.clamp(reach / f64(SAMPLE_RAMP), f64(0.0), f64(1.0))
-        clearance[e] = floor * u * u * (f64(3.0) - f64(2.0) * u)
+        clearance[e] = floor * ramp(reach / f64(SAMPLE_RAMP))
         for k in range(ts.shape[0]):
             t = ts[k]
             bound = wp.max(d[i] - t * length, d[j] - (f64(1.0) - t) * length)
@@ -482,12 +487,6 @@ def _kernels() -> SimpleNamespace:
                 if rho > f64(0.0):
                     previous[i] = current[i]
                     current[i] = xi
-
-    @wp.func
-    def ramp(t: wp.float64) -> wp.float64:
-        """smoothstep: 3t^2 - 2t^3 of t clipped to [0, 1] (as garsim.geometry.proximity.smoothstep)."""
-        u = wp.clamp(t, f64(0.0), f64(1.0))
-        return u * u * (f64(3.0) - f64(2.0) * u)
 
     @wp.func
     def side_weight(normal: wp.vec3d, shift: wp.vec3d) -> wp.float64:
