@@ -102,8 +102,8 @@ limit whatever the sweeps do: such a garment always runs ``MAX_ROUNDS`` rounds. 
 them stay through (see Continuity).
 """
 
-from __future__ import annotations
-
+# No ``from __future__ import annotations`` here: warp reads the kernels' annotations, and a string annotation
+# cannot name the local warp struct (Surface) that they take.
 from functools import lru_cache
 from types import SimpleNamespace
 from typing import Any
@@ -199,7 +199,8 @@ _DEVICE = "cpu"
 def _kernels() -> SimpleNamespace:
     wp = quiet_warp()
     f64 = wp.float64
-    signed_closest = surface_funcs().signed_closest  # the shared exact query (garsim.geometry.inside)
+    surface_query = surface_funcs()  # the shared exact query (garsim.geometry.inside)
+    signed_closest, Surface = surface_query.signed_closest, surface_query.Surface
 
     @wp.func
     def ramp(t: wp.float64) -> wp.float64:
@@ -209,12 +210,7 @@ def _kernels() -> SimpleNamespace:
 
     @wp.kernel(enable_backward=False, module="unique")
     def vertex_state(
-        mesh: wp.uint64,
-        verts: wp.array(dtype=wp.vec3d),
-        faces: wp.array2d(dtype=wp.int32),
-        face_adj: wp.array2d(dtype=wp.int32),
-        vf_start: wp.array(dtype=wp.int32),
-        vf_face: wp.array(dtype=wp.int32),
+        surface: Surface,
         x: wp.array(dtype=wp.vec3d),
         mobile: wp.array(dtype=wp.float64),
         band: wp.float64,
@@ -248,7 +244,7 @@ def _kernels() -> SimpleNamespace:
             radius = f64(UNBOUNDED)
             if first != 1:
                 radius = wp.abs(dq[i]) + moved
-            ok, s, cp, n = signed_closest(mesh, verts, faces, face_adj, vf_start, vf_face, x[i], radius)
+            ok, s, cp, n = signed_closest(surface, x[i], radius)
             xq[i] = x[i]
             dq[i] = s
             cq[i] = cp
@@ -260,12 +256,7 @@ def _kernels() -> SimpleNamespace:
 
     @wp.kernel(enable_backward=False, module="unique")
     def sample_state(
-        mesh: wp.uint64,
-        verts: wp.array(dtype=wp.vec3d),
-        faces: wp.array2d(dtype=wp.int32),
-        face_adj: wp.array2d(dtype=wp.int32),
-        vf_start: wp.array(dtype=wp.int32),
-        vf_face: wp.array(dtype=wp.int32),
+        surface: Surface,
         x: wp.array(dtype=wp.vec3d),
         d: wp.array(dtype=wp.float64),
         mobile: wp.array(dtype=wp.float64),
@@ -305,13 +296,13 @@ def _kernels() -> SimpleNamespace:
             return  # a pinned end inside the obstacle: the edge cannot leave it
         reach = wp.max(-d[i], -d[j])  # an end inside: the deeper one
         if d[i] > f64(0.0) and d[j] > f64(0.0):
-            if not wp.mesh_query_ray_anyhit(mesh, wp.vec3(x[i]), wp.vec3(seg), 1.0):
+            if not wp.mesh_query_ray_anyhit(surface.mesh, wp.vec3(x[i]), wp.vec3(seg), 1.0):
                 return
-            q = wp.mesh_query_ray(mesh, wp.vec3(x[i]), wp.vec3(seg), 1.0)
+            q = wp.mesh_query_ray(surface.mesh, wp.vec3(x[i]), wp.vec3(seg), 1.0)
             inside = f64(1.0)
             if q.result:
                 inside = f64(1.0) - f64(q.t)  # the segment from its first entry ...
-            r = wp.mesh_query_ray(mesh, wp.vec3(x[j]), -wp.vec3(seg), 1.0)
+            r = wp.mesh_query_ray(surface.mesh, wp.vec3(x[j]), -wp.vec3(seg), 1.0)
             if r.result:
                 inside = inside - f64(r.t)  # ... to its last exit
             reach = f64(0.5) * wp.max(inside, f64(0.0)) * length
@@ -323,7 +314,7 @@ def _kernels() -> SimpleNamespace:
             if bound < keep:
                 p = (f64(1.0) - t) * x[i] + t * x[j]
                 radius = wp.max(-bound, keep)  # nothing within it: the sample is farther out than keep
-                ok, s, cp, n = signed_closest(mesh, verts, faces, face_adj, vf_start, vf_face, p, radius)
+                ok, s, cp, n = signed_closest(surface, p, radius)
                 if ok == 1 and s < depth[e]:
                     depth[e] = s
                     deep_normal[e] = n
@@ -852,8 +843,8 @@ class _State:
         sweeps += [con.wp_moving, con.wp_ts, *listed, buf["s_close"], buf["s_normal"], buf["v_active"]]
         sweeps += [buf[name] for name in ("cq", "nq", "d", "acc", "wsum", "current", "previous", "chebyshev")]
         cmd = SimpleNamespace(
-            vertex=record(k.vertex_state, n, [*obs.inputs, *vertex]),
-            samples=record(k.sample_state, ne, [*obs.inputs, *samples]) if ne else None,
+            vertex=record(k.vertex_state, n, [obs.surface, *vertex]),
+            samples=record(k.sample_state, ne, [obs.surface, *samples]) if ne else None,
             violations=record(
                 k.violations,
                 1,

@@ -17,8 +17,8 @@ with its nearest body vertex and that vertex's normal, and counts as colliding w
 ``(x - b) . n < 0``.
 """
 
-from __future__ import annotations
-
+# No ``from __future__ import annotations`` here: warp reads the kernels' annotations, and a string annotation
+# cannot name the local warp struct (Surface) that they take.
 from functools import lru_cache
 from types import SimpleNamespace
 from typing import Any
@@ -130,10 +130,22 @@ def _kernels():
 @lru_cache(maxsize=1)
 def surface_funcs() -> SimpleNamespace:
     """The warp functions of the exact signed closest-point query, for kernels elsewhere (garsim.refine) to call:
-    ``signed_closest(mesh, verts, faces, face_adj, vf_start, vf_face, p, radius)`` -> (found, signed distance,
-    closest point, outward unit normal), its parts, and the ``query_points`` kernel behind :meth:`Obstacle.query`."""
+    ``signed_closest(surface, p, radius)`` -> (found, signed distance, closest point, outward unit normal) on a
+    ``Surface`` (:attr:`Obstacle.surface`), its parts, and the ``query_points`` kernel behind :meth:`Obstacle.query`."""
     wp = quiet_warp()
     f64 = wp.float64
+
+    @wp.struct
+    class Surface:
+        """A posed obstacle as the query reads it: its BVH, float64 vertices, faces, each face's neighbour across
+        each edge (-1 on a boundary) and the faces around each vertex (CSR: vf_face[vf_start[v]:vf_start[v + 1]])."""
+
+        mesh: wp.uint64
+        verts: wp.array(dtype=wp.vec3d)
+        faces: wp.array2d(dtype=wp.int32)
+        face_adj: wp.array2d(dtype=wp.int32)
+        vf_start: wp.array(dtype=wp.int32)
+        vf_face: wp.array(dtype=wp.int32)
 
     @wp.func
     def closest_on_triangle(p: wp.vec3d, a: wp.vec3d, b: wp.vec3d, c: wp.vec3d) -> wp.vec3d:
@@ -179,26 +191,20 @@ def surface_funcs() -> SimpleNamespace:
         return wp.vec3d()
 
     @wp.func
-    def feature_normal(
-        verts: wp.array(dtype=wp.vec3d),
-        faces: wp.array2d(dtype=wp.int32),
-        face_adj: wp.array2d(dtype=wp.int32),
-        vf_start: wp.array(dtype=wp.int32),
-        vf_face: wp.array(dtype=wp.int32),
-        f: int,
-        feature: int,
-    ) -> wp.vec3d:
+    def feature_normal(surface: Surface, f: int, feature: int) -> wp.vec3d:
         """Angle-weighted pseudo-normal (unnormalised) of a feature of face f (see closest_on_triangle)."""
+        verts = surface.verts
+        faces = surface.faces
         n = face_normal(verts, faces, f)
         if feature >= 4:  # edge: the sum of its faces' unit normals
-            g = face_adj[f, feature - 4]
+            g = surface.face_adj[f, feature - 4]
             if g >= 0:
                 n = n + face_normal(verts, faces, g)
         elif feature >= 1:  # vertex: its corners' unit normals weighted by the corner angles
             v = faces[f, feature - 1]
             n = wp.vec3d()
-            for k in range(vf_start[v], vf_start[v + 1]):
-                g = vf_face[k]
+            for k in range(surface.vf_start[v], surface.vf_start[v + 1]):
+                g = surface.vf_face[k]
                 c = 0
                 if faces[g, 1] == v:
                     c = 1
@@ -212,27 +218,20 @@ def surface_funcs() -> SimpleNamespace:
         return n
 
     @wp.func
-    def signed_closest(
-        mesh: wp.uint64,
-        verts: wp.array(dtype=wp.vec3d),
-        faces: wp.array2d(dtype=wp.int32),
-        face_adj: wp.array2d(dtype=wp.int32),
-        vf_start: wp.array(dtype=wp.int32),
-        vf_face: wp.array(dtype=wp.int32),
-        p: wp.vec3d,
-        radius: wp.float64,
-    ):
+    def signed_closest(surface: Surface, p: wp.vec3d, radius: wp.float64):
         """(found, signed distance, closest point, outward unit normal) of p, searched within ``radius``."""
-        q = wp.mesh_query_point_no_sign(mesh, wp.vec3(p), wp.float32(radius) + wp.float32(_SLACK))
+        q = wp.mesh_query_point_no_sign(surface.mesh, wp.vec3(p), wp.float32(radius) + wp.float32(_SLACK))
         if not q.result:
             return 0, radius, wp.vec3d(), wp.vec3d()
         f = q.face
+        verts = surface.verts
+        faces = surface.faces
         a = verts[faces[f, 0]]
         b = verts[faces[f, 1]]
         c = verts[faces[f, 2]]
         vw = closest_on_triangle(p, a, b, c)
         cp = a + vw[0] * (b - a) + vw[1] * (c - a)
-        fn = feature_normal(verts, faces, face_adj, vf_start, vf_face, f, int(vw[2]))
+        fn = feature_normal(surface, f, int(vw[2]))
         diff = p - cp
         dist = wp.length(diff)
         sign = f64(1.0)
@@ -245,12 +244,7 @@ def surface_funcs() -> SimpleNamespace:
 
     @wp.kernel(enable_backward=False, module="unique")
     def query_points(
-        mesh: wp.uint64,
-        verts: wp.array(dtype=wp.vec3d),
-        faces: wp.array2d(dtype=wp.int32),
-        face_adj: wp.array2d(dtype=wp.int32),
-        vf_start: wp.array(dtype=wp.int32),
-        vf_face: wp.array(dtype=wp.int32),
+        surface: Surface,
         p: wp.array(dtype=wp.vec3d),
         radius: wp.float64,
         found: wp.array(dtype=wp.int32),
@@ -259,13 +253,14 @@ def surface_funcs() -> SimpleNamespace:
         normal: wp.array(dtype=wp.vec3d),
     ):
         t = wp.tid()
-        ok, s, cp, n = signed_closest(mesh, verts, faces, face_adj, vf_start, vf_face, p[t], radius)
+        ok, sd_t, cp, n = signed_closest(surface, p[t], radius)
         found[t] = ok
-        sd[t] = s
+        sd[t] = sd_t
         close[t] = cp
         normal[t] = n
 
     return SimpleNamespace(
+        Surface=Surface,
         closest_on_triangle=closest_on_triangle,
         face_normal=face_normal,
         feature_normal=feature_normal,
@@ -316,8 +311,12 @@ class Obstacle:
         self.points = wp.zeros(num_vertices, dtype=wp.vec3d, device=_DEVICE)
         self.mesh: Any = None
         self.key: tuple | None = None
+        # what every kernel that queries the obstacle takes (the BVH's id is set once the first pose builds it)
+        self.surface = surface_funcs().Surface()
+        self.surface.verts, self.surface.faces, self.surface.face_adj = self.points, self.faces, self.face_adj
+        self.surface.vf_start, self.surface.vf_face = self.vf_start, self.vf_face
 
-    def pose(self, vertices: np.ndarray) -> Obstacle:
+    def pose(self, vertices: np.ndarray) -> "Obstacle":
         """Move the mesh to ``vertices`` (refit the BVH) unless it is there."""
         v = np.ascontiguousarray(vertices, dtype=np.float64)
         key = content_key(v)
@@ -327,15 +326,11 @@ class Obstacle:
         self.points32.numpy()[:] = v
         if self.mesh is None:
             self.mesh = quiet_warp().Mesh(points=self.points32, indices=self.indices)
+            self.surface.mesh = self.mesh.id
         else:
             self.mesh.refit()
         self.key = key
         return self
-
-    @property
-    def inputs(self) -> list:
-        """The leading arguments of every kernel that queries the obstacle."""
-        return [self.mesh.id, self.points, self.faces, self.face_adj, self.vf_start, self.vf_face]
 
     def query(
         self, points: np.ndarray, radius: float = UNBOUNDED
@@ -351,7 +346,7 @@ class Obstacle:
             wp.launch(
                 surface_funcs().query_points,
                 dim=m,
-                inputs=[*self.inputs, _wp(p, wp.vec3d), float(radius)],
+                inputs=[self.surface, _wp(p, wp.vec3d), float(radius)],
                 outputs=[_wp(found, wp.int32), _wp(sd, wp.float64), _wp(close, wp.vec3d), _wp(normal, wp.vec3d)],
                 device=_DEVICE,
             )
