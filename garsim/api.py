@@ -17,7 +17,7 @@ from garsim.garments.garment import Garment
 from garsim.garments.remesh import BarycentricMap, barycentric_map, decimate, transfer_barycentric
 from garsim.geometry.cache import ContentCache, content_key
 from garsim.geometry.io import UNITS, MeshError, as_mesh, from_internal, to_internal
-from garsim.geometry.mesh import cached_vertex_normals, top_border_loops
+from garsim.geometry.mesh import cached_vertex_normals, top_border_loops, weld, weld_index
 from garsim.geometry.proximity import push_outside
 
 WEIGHTS_DIR = Path(__file__).parent / "weights"
@@ -134,7 +134,11 @@ _SCENES = ContentCache(4, scope="garment")  # Scene.make's scenes, by the conten
 class Scene:
     """The per-sequence part of a drape: the validated canonical body and garment (garsim's frame), the garment's
     pin mask and fabric. ``sample(target)`` adds one target body. ``Scene.make`` keeps the last few scenes by
-    content, so draping one garment on pose after pose validates it and sets up its prior once."""
+    content, so draping one garment on pose after pose validates it and sets up its prior once.
+
+    The scene's garment is the user's with coincident vertices welded (within ``WELD_TOLERANCE``: a mesh split at
+    UV seams or hard edges, as glTF files store them, would otherwise be draped as separate panels and its seams
+    would open); ``welded`` maps each of the user's vertices to the scene's, and :meth:`unweld` maps results back."""
 
     body_canonical: np.ndarray
     body_faces: np.ndarray
@@ -146,6 +150,7 @@ class Scene:
     garment_type: str = "unknown"
     up: str = "z"
     units: str = "m"
+    welded: np.ndarray | None = None
 
     @classmethod
     def make(
@@ -193,14 +198,25 @@ class Scene:
     ) -> Scene:
         """A new Scene of meshes already in garsim's frame, once their relation and the pins are checked."""
         check_scene(bc, g, up=up, units=units)
+        index = weld_index(g, gf)
+        mask = None if isinstance(pinned, str) else _pinned_mask(pinned, len(g))  # the user's vertices
+        if index is not None:
+            g, gf = weld(g, gf, index)
+            if mask is not None:  # a welded vertex is pinned when any of its copies is
+                mask = np.bincount(index[mask], minlength=len(g)) > 0
         if isinstance(pinned, str):
             if pinned.strip().lower() != "auto":
                 raise ValueError(f"pinned must be 'auto', vertex indices or a boolean mask, got {pinned!r}")
-            pinned = auto_pinned(g, gf)
-        arrays = (bc, np.array(bf), g, np.array(gf), np.array(_pinned_mask(pinned, len(g))))  # the scene's own copies
-        for a in arrays:
-            a.flags.writeable = False  # per-scene set-up (Scene.prior) is computed once from them
-        return cls(*arrays, fabric_name, fabric_values, garment_type, up, units)
+            mask = auto_pinned(g, gf)
+        arrays = (bc, np.array(bf), g, np.array(gf), np.array(mask))  # the scene's own copies
+        for a in (*arrays, index):
+            if a is not None:
+                a.flags.writeable = False  # per-scene set-up (Scene.prior) is computed once from them
+        return cls(*arrays, fabric_name, fabric_values, garment_type, up, units, index)
+
+    def unweld(self, garment: np.ndarray) -> np.ndarray:
+        """Per-vertex values of the scene's garment (..., M, k) on the user's garment's vertices (..., N, k)."""
+        return garment if self.welded is None else garment[..., self.welded, :]
 
     def target_vertices(self, body_target: Any) -> np.ndarray:
         """A target body (a mesh, or an array of vertices on the canonical body's faces) in garsim's frame; it must
@@ -272,7 +288,8 @@ def make_sample(
     """Validate user meshes (in ``up`` axis and ``units``) and build the model's input record (with the prior).
 
     ``pinned``: garment vertex indices, an (N,) boolean mask, ``"auto"`` (the top border loops, found in the
-    canonical body's frame: :func:`auto_pinned`) or None; pinned vertices follow the prior exactly."""
+    canonical body's frame: :func:`auto_pinned`) or None; pinned vertices follow the prior exactly. The record's
+    garment is the scene's, coincident vertices welded (:class:`Scene`)."""
     return Scene.make(body_canonical, garment, fabric, pinned, garment_type, up, units).sample(body_target)
 
 
@@ -523,7 +540,8 @@ class GarSim:
         ``pinned`` (indices, a mask, or ``"auto"``: the garment's top border loops) vertices follow the prior
         exactly.
         """
-        out = self.predict(make_sample(body_canonical, body_target, garment, fabric, pinned, up=up, units=units))
+        scene = Scene.make(body_canonical, garment, fabric, pinned, up=up, units=units)
+        out = scene.unweld(self.predict(scene.sample(body_target)))
         return from_internal(out, up, units).astype(np.float32)
 
     def drape_sequence(
@@ -586,4 +604,4 @@ class GarSim:
                 # without the fallback: the first pass handed what needed it to the prior, the smoothing spread that
                 # over time; handing patches to it again here would bring back the jumps the smoothing removed
                 done = [self.finish(p, s, m, fallback=False) for s, p, m in zip(samples, again, memos)]
-        return np.stack([from_internal(f, up, units).astype(np.float32) for f in done])
+        return np.stack([from_internal(scene.unweld(f), up, units).astype(np.float32) for f in done])

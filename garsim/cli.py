@@ -290,7 +290,7 @@ def cmd_drape(args: argparse.Namespace) -> int:
     samples = [scene.sample(body) for body in bodies]  # bad meshes are refused before the model loads
     sim = GarSim.prior_only() if args.prior_only else GarSim.pretrained()
     for sample, path, png_path in zip(samples, outs, pngs):
-        pred = sim.predict(sample)
+        pred = scene.unweld(sim.predict(sample))  # on the file's vertices (coincident ones were draped as one)
         verts = from_internal(pred, args.up, args.units).astype(np.float32)
         if png_path is not None:  # the render is the likelier of the two writes to fail: before the mesh
             from garsim.geometry.render import render_views

@@ -16,6 +16,8 @@ from garsim.geometry.mesh import (
     uniform_laplacian,
     unique_edges,
     vertex_normals,
+    weld,
+    weld_index,
 )
 
 # unit square in the z=0 plane split along the diagonal 0-2
@@ -170,3 +172,26 @@ def test_surface_smoother_keeps_constants_and_spreads_a_spike_by_sigma():
         out = smooth(spike)[:, 0]
         assert out.sum() == pytest.approx(1.0, abs=1e-9)
         assert np.sqrt(np.sum(out * r2) / 2.0) == pytest.approx(sigma, rel=0.02)
+
+
+def test_a_square_split_along_its_diagonal_is_welded_back():
+    """The square's second triangle on copies of the diagonal's vertices (4 = 0, 5 = 2), as a file split at a seam
+    stores it (one copy 5e-5 m off): welded, the square again, each group at its copies' mean."""
+    v = np.concatenate([SQUARE_V, SQUARE_V[[0, 2]] + [[0.0, 0.0, 0.0], [0.0, 0.0, 5e-5]]])
+    index = weld_index(v, np.array([[0, 1, 2], [4, 5, 3]]))
+    np.testing.assert_array_equal(index, [0, 1, 2, 3, 0, 2])
+    welded, faces = weld(v, np.array([[0, 1, 2], [4, 5, 3]]), index)
+    np.testing.assert_allclose(welded, SQUARE_V + [[0, 0, 0], [0, 0, 0], [0, 0, 2.5e-5], [0, 0, 0]])
+    np.testing.assert_array_equal(faces, SQUARE_F)
+
+
+def test_weld_leaves_short_edges_and_distant_vertices_and_drops_collapsed_and_repeated_faces():
+    tiny = np.array([[0, 0, 0], [1e-5, 0, 0], [0, 1, 0]], dtype=np.float64)  # an edge of 10 micrometres
+    assert weld_index(tiny, np.array([[0, 1, 2]])) is None
+    assert weld_index(SQUARE_V, SQUARE_F) is None
+    # vertex 4 a copy of 2: face [1, 2, 4] collapses, face [4, 3, 0] repeats [0, 2, 3]
+    v = np.concatenate([SQUARE_V, SQUARE_V[[2]]])
+    f = np.array([[0, 1, 2], [0, 2, 3], [1, 2, 4], [4, 3, 0]])
+    index = np.array([0, 1, 2, 3, 2])
+    _, faces = weld(v, f, index)
+    np.testing.assert_array_equal(faces, SQUARE_F)

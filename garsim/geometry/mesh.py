@@ -199,3 +199,41 @@ def top_border_loops(vertices: np.ndarray, faces: np.ndarray, band: float = TOP_
     tops = np.array([z[loop].max() for loop in loops])
     keep = np.flatnonzero(tops >= tops.max() - band)
     return [loops[i] for i in keep[np.argsort(-tops[keep], kind="stable")]]
+
+
+WELD_TOLERANCE = 1e-4
+"""m: garment vertices this close to one another and not joined by an edge are one vertex split in the file (at UV
+seams or hard edges, as glTF exporters write them) and are draped as one (``garsim.api.Scene``)."""
+
+
+def weld_index(vertices: np.ndarray, faces: np.ndarray, tolerance: float = WELD_TOLERANCE) -> np.ndarray | None:
+    """(N,) the welded vertex of each vertex when some lie within ``tolerance`` of another without sharing an edge
+    with it (groups chain: a within reach of b, b of c), numbered by each group's lowest vertex index; None when no
+    two do. A mesh's own short edges are left alone (remeshers leave some of a few micrometres)."""
+    from scipy.sparse.csgraph import connected_components
+    from scipy.spatial import cKDTree
+
+    v = np.asarray(vertices, dtype=np.float64)
+    n = len(v)
+    pairs = cKDTree(v).query_pairs(tolerance, output_type="ndarray")
+    if len(pairs):
+        edges = unique_edges(faces)
+        pairs = pairs[~np.isin(pairs.min(1) * n + pairs.max(1), edges.min(1) * n + edges.max(1))]
+    if len(pairs) == 0:
+        return None
+    graph = sp.coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(n, n))
+    return connected_components(graph, directed=False)[1].astype(np.int64)
+
+
+def weld(vertices: np.ndarray, faces: np.ndarray, index: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The mesh with each group of ``index`` (:func:`weld_index`) as one vertex at the group's mean (so the result
+    is continuous in the input); faces that collapse (two corners in one group) or repeat another's three
+    vertices are dropped, the first of repeated ones kept."""
+    v = np.asarray(vertices, dtype=np.float64)
+    m = int(index.max()) + 1
+    counts = np.bincount(index, minlength=m)[:, None]
+    welded = np.stack([np.bincount(index, weights=v[:, k], minlength=m) for k in range(3)], axis=1) / counts
+    f = index[np.asarray(faces, dtype=np.int64)]
+    f = f[(f[:, 0] != f[:, 1]) & (f[:, 1] != f[:, 2]) & (f[:, 2] != f[:, 0])]
+    first = np.unique(np.sort(f, axis=1), axis=0, return_index=True)[1]
+    return welded.astype(np.asarray(vertices).dtype), f[np.sort(first)]
