@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import subprocess
+import sys
 import time
 
 import numpy as np
@@ -116,3 +118,15 @@ def test_exact_obstacle_is_shared_and_agrees_with_the_tester(icosphere):
     expected = np.sign(sd[away])[:, None] * (p[away] - close[away]) / np.abs(sd[away])[:, None]
     assert np.allclose(normal[away], expected, atol=1e-9)
     assert (np.einsum("ij,ij->i", normal, close) > 0).all()  # a sphere about the origin: normals point outwards
+
+
+def test_warp_starts_quietly():
+    """A fresh process that starts warp through garsim prints nothing: no banner, and no CUDA-driver warning on a
+    machine without one (garsim runs on the CPU)."""
+    from garsim.geometry.inside import _cuda_driver_present
+
+    code = "from garsim.geometry.inside import quiet_warp; quiet_warp().zeros(3)"
+    run = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True, timeout=120)
+    assert run.stdout == ""
+    if not _cuda_driver_present():
+        assert run.stderr == ""

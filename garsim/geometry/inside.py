@@ -19,6 +19,10 @@ with its nearest body vertex and that vertex's normal, and counts as colliding w
 
 # No ``from __future__ import annotations`` here: warp reads the kernels' annotations, and a string annotation
 # cannot name the local warp struct (Surface) that they take.
+import os
+import sys
+from collections.abc import Iterator
+from contextlib import contextmanager
 from functools import lru_cache
 from types import SimpleNamespace
 from typing import Any
@@ -37,7 +41,9 @@ _TESTERS = ContentCache(4)  # per body mesh: the one-shot functions' InsideTeste
 
 @lru_cache(maxsize=1)
 def quiet_warp():
-    """Import and initialise warp once, quietly: no banner on stdout (the kernel cache is ``~/.cache/warp``).
+    """Import and initialise warp once, quietly: no banner on stdout, and on a Linux machine without a CUDA driver
+    not warp's "Could not find or load the NVIDIA CUDA driver" on stderr either (garsim runs on the CPU; the kernel
+    cache is ``~/.cache/warp``).
 
     Every garsim module that uses warp (directly, or through Anny or Newton) calls this first."""
     import warp as wp
@@ -47,8 +53,39 @@ def quiet_warp():
         wp.config.quiet = True
         if hasattr(wp, "LOG_WARNING"):
             wp.config.log_level = wp.LOG_WARNING
-        wp.init()
+        with _stderr_silenced(sys.platform.startswith("linux") and not _cuda_driver_present()):
+            wp.init()
     return wp
+
+
+def _cuda_driver_present() -> bool:
+    """Whether the CUDA driver library loads (what warp's initialisation tries, warning on stderr when it cannot)."""
+    import ctypes
+
+    for name in ("libcuda.so", "libcuda.so.1"):
+        try:
+            ctypes.CDLL(name)
+            return True
+        except OSError:
+            continue
+    return False
+
+
+@contextmanager
+def _stderr_silenced(silence: bool) -> Iterator[None]:
+    """Send what native code writes to file descriptor 2 to /dev/null while in the block (when ``silence``)."""
+    if not silence:
+        yield
+        return
+    sys.stderr.flush()
+    saved = os.dup(2)
+    try:
+        with open(os.devnull, "w") as null:
+            os.dup2(null.fileno(), 2)
+            yield
+    finally:
+        os.dup2(saved, 2)
+        os.close(saved)
 
 
 @lru_cache(maxsize=1)
