@@ -16,6 +16,7 @@ from garsim.eval.robustness import (
     rest_displacement_mm,
     scenes_from_npz,
     scenes_from_store,
+    split_at_seam,
     turn_about_vertical,
 )
 from garsim.geometry.io import load_mesh
@@ -68,6 +69,32 @@ def test_an_order_dependent_draper_is_caught_by_the_vertex_permutation():
     changes = perturbation_changes(Offset(ramp=(0.01, 0.0, 0.0)), _scene(n=40))
     assert 5.0 < changes["vertex_permutation"] <= 10.0  # the ramp moves some vertex by up to 10 mm x (N-1)/N
     assert changes["face_permutation"] < 1e-6
+
+
+class Valence(Offset):
+    """Drapes by lifting each vertex 1 mm per face that uses it: blind to where a file splits its vertices."""
+
+    def drape(self, canonical, target, garment, fabric):
+        v, f = load_mesh(garment) if isinstance(garment, str) else garment
+        v = np.asarray(v, dtype=np.float64)
+        return v + [0.0, 0.0, 0.001] * np.bincount(np.asarray(f).ravel(), minlength=len(v))[:, None]
+
+
+def test_split_at_seam_by_hand():
+    """A front panel (y = -1) of two squares, left and right of x = 0, and one vertex at the back: the two panel
+    vertices on x = 0 get copies (6, 7), which the right square's faces take."""
+    v = np.array([[-1, -1, 0], [0, -1, 0], [1, -1, 0], [-1, -1, 1], [0, -1, 1], [1, -1, 1], [0, 1, 0.5]], float)
+    f = np.array([[0, 1, 4], [0, 4, 3], [1, 2, 5], [1, 5, 4]])
+    sv, sf, source = split_at_seam(v, f)
+    np.testing.assert_array_equal(source, [0, 1, 2, 3, 4, 5, 6, 1, 4])
+    np.testing.assert_array_equal(sv, v[source])
+    np.testing.assert_array_equal(sf, [[0, 1, 4], [0, 4, 3], [7, 2, 5], [7, 5, 8]])
+
+
+def test_a_draper_that_reads_the_file_s_connectivity_is_caught_by_the_seam_split():
+    changes = perturbation_changes(Valence(), _scene())
+    assert changes["seam_split"] >= 1.0  # a seam vertex of the strip loses at least one of its faces to its copy
+    assert changes["face_permutation"] < 1e-6 and changes["vertex_permutation"] < 1e-6
 
 
 def test_the_noise_check_takes_the_largest_change_over_its_draws():

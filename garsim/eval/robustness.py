@@ -9,6 +9,9 @@ outputs at any garment vertex, after undoing the change:
 - ``obj_round_trip``: the three meshes written with ``save_mesh`` and draped from the files;
 - ``face_permutation``: the garment's faces in a random order;
 - ``vertex_permutation``: the garment's vertices in a random order (the output must follow the permutation);
+- ``seam_split``: the garment written as GLB with its vertices split along a seam down its front (another tool's
+  file: glTF stores one vertex per UV, so exporters split vertices at UV seams), draped from the file; every copy
+  must land where its vertex does;
 - ``turn_37``, ``turn_180``: the whole scene turned about the vertical (z) axis, the output turned back;
 - ``shift_10m``: the whole scene moved 10 m horizontally, the output moved back.
 
@@ -29,7 +32,13 @@ import numpy as np
 
 from garsim.geometry.io import save_mesh
 
-STABILITY_CHECKS: tuple[str, ...] = ("noise", "obj_round_trip", "face_permutation", "vertex_permutation")
+STABILITY_CHECKS: tuple[str, ...] = (
+    "noise",
+    "obj_round_trip",
+    "face_permutation",
+    "vertex_permutation",
+    "seam_split",
+)
 EQUIVARIANCE_CHECKS: tuple[str, ...] = ("turn_37", "turn_180", "shift_10m")
 CHECKS: tuple[str, ...] = STABILITY_CHECKS + EQUIVARIANCE_CHECKS
 NOISE_M = 1e-6
@@ -59,6 +68,25 @@ def turn_about_vertical(vertices: np.ndarray, degrees: float, shift: np.ndarray 
     return out if shift is None else out + shift
 
 
+def split_at_seam(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The garment as a file split along a seam stores it: the vertices shared by the front faces left and right of
+    the garment's centre (x, y of its vertex mean; the body faces -y) get copies appended, which the right-hand faces
+    use. Returns the split vertices, faces and each split vertex's original (N + S,)."""
+    v, f = np.asarray(vertices), np.asarray(faces, dtype=np.int64)
+    centre, centroids = v.mean(axis=0), v[f].mean(axis=1)
+    front = centroids[:, 1] < centre[1]
+    right = front & (centroids[:, 0] > centre[0])
+    sides = np.zeros((2, len(v)), dtype=bool)
+    sides[0, f[front & ~right].ravel()] = True
+    sides[1, f[right].ravel()] = True
+    seam = np.flatnonzero(sides.all(axis=0))
+    renumber = np.arange(len(v))
+    renumber[seam] = len(v) + np.arange(len(seam))
+    split = f.copy()
+    split[right] = renumber[f[right]]
+    return np.concatenate([v, v[seam]]), split, np.concatenate([np.arange(len(v)), seam])
+
+
 def _drape(sim: Any, canonical: Any, target: Any, garment: Any, fabric: Any) -> np.ndarray:
     return np.asarray(sim.drape(canonical, target, garment, fabric=fabric), dtype=np.float64)
 
@@ -85,6 +113,9 @@ def perturbation_changes(sim: Any, scene: Scene, seed: int = 0, noise_draws: int
             paths.append(str(Path(tmp) / f"{name}.obj"))
             save_mesh(paths[-1], v, f)
         out["obj_round_trip"] = _max_mm(_drape(sim, *paths, scene.fabric), ref)
+        sv, sf, source = split_at_seam(gv, gf)
+        save_mesh(Path(tmp) / "split.glb", sv, sf)
+        out["seam_split"] = _max_mm(_drape(sim, can, tgt, str(Path(tmp) / "split.glb"), scene.fabric), ref[source])
     faces = gf[rng.permutation(len(gf))]
     out["face_permutation"] = _max_mm(_drape(sim, can, tgt, (gv, faces), scene.fabric), ref)
     perm = rng.permutation(len(gv))
