@@ -98,6 +98,34 @@ def test_post_processed_rows_leave_out_what_their_post_process_enforces(tmp_path
     assert "| shrunk+push | all | 4 |" in format_table(res) and " - |" in format_table(res)
 
 
+def test_refined_rows_take_the_margin_and_a_plus_in_a_model_s_name_keeps_its_raw_figures(tmp_path, monkeypatch):
+    """``collision_margin`` reaches both post-processes (the refinement too), None leaves the post-processed rows
+    out, and a raw model whose name holds a "+" keeps every collision figure: only the text after the last "+" names
+    a post-process."""
+    import garsim.eval.experiments as experiments
+
+    margins = []
+
+    def recorded(pred, sample, collision_margin=0.002, refine=True, **kwargs):
+        margins.append((collision_margin, refine))
+        return pred
+
+    monkeypatch.setattr(experiments, "postprocess", recorded)
+
+    class Inside:
+        def predict(self, samples):
+            return [s.prior * 0.95 for s in samples]
+
+    root = _store(tmp_path)
+    res = evaluate_split(Inside(), root, "test", name="m+v2", refine=True, collision_margin=0.005)
+    assert set(margins) == {(0.005, False), (0.005, True)} and len(margins) == 3 * 4  # push, refine, prior+refine
+    assert {"collision_pct", "inside_pct", "edge_crossing_pct"} <= set(res["m+v2"]["all"])
+    assert "inside_pct" not in res["m+v2+refine"]["all"] and "collision_pct" not in res["m+v2+push"]["all"]
+    margins.clear()
+    res = evaluate_split(Inside(), root, "test", refine=True, collision_margin=None)
+    assert not margins and set(res) == {"garsim", "prior", "nearest", "ground truth"}
+
+
 def test_jitter_of_an_animation_beside_the_truth(tmp_path):
     """A dynamic sequence of 3 consecutive frames: the truth at +0, +0.5 and +2 mm along Z (second difference
     1 mm/frame²), the prior standing still (0)."""
@@ -229,3 +257,14 @@ def test_compare_models_gives_the_difference_per_group(tmp_path):
     assert row["better_share"] == 1.0
     text = format_comparison(table, "truth", "prior")
     assert "| skirt | 2 | 0.00 | 10.00 | -10.00 | [-10.00, -10.00] | 100% |" in text
+
+
+def test_the_fabric_spread_ratio_is_a_ratio_of_means_by_hand():
+    """Groups with simulated spreads 2.04 and -10 mm (leather nearer the body), predicted 1 and -3 mm: (1 + 3) /
+    12.04, where a mean of per-group ratios (0.49, 0.3) would weigh the group that barely passes the gap as much;
+    a predicted spread the wrong way counts against it."""
+    from garsim.eval.experiments import _spread_ratio
+
+    assert _spread_ratio([(1.0, 2.04), (-3.0, -10.0)]) == pytest.approx(4.0 / 12.04)
+    assert _spread_ratio([(1.0, 2.04), (3.0, -10.0)]) == pytest.approx(-2.0 / 12.04)
+    assert _spread_ratio([]) is None

@@ -96,6 +96,32 @@ def test_robustness_goals_per_set_of_templates():
     assert goals["external set: rest, worst mean displacement"].met is False  # 4 > 3 mm
 
 
+def test_external_groups_with_failed_drapes_are_not_measured():
+    """check.py scores only the drapes that ran: a type where some failed is not measured, nor is the overall ratio
+    or the raw network's collisions when a drape of the raw run failed."""
+    defaults = _external({"all": 0.55, "skirt": 0.5, "top": 0.9})
+    defaults["summary"]["all"].update(n=31, predicted=20)
+    defaults["summary"]["top"].update(n=5, predicted=0)
+    defaults["summary"]["skirt"].update(n=8, predicted=8)
+    raw = _external({"all": 0.6})
+    raw["summary"]["all"].update(n=31, predicted=30)
+    goals = _by_name(model_goals({}, defaults, raw))
+    assert goals["external set: API defaults / prior, all"].met is None
+    assert goals["external set: worst garment type (drapes failed: top)"].met is None
+    assert goals["external set: raw network, vertices inside the body"].met is None
+    whole = _external({"all": 0.55, "skirt": 0.5})
+    for group in whole["summary"].values():
+        group.update(n=8, predicted=8)
+    assert _by_name(model_goals({}, whole, None))["external set: worst garment type (skirt)"].met
+
+
+def test_the_worst_family_is_a_garment_type_whatever_else_the_table_groups():
+    results = _results()
+    for method in ("garsim", "prior"):
+        results["test"][method]["fabric=silk"] = _row(30.0 if method == "garsim" else 31.0)
+    assert "test split: worst family (top)" in _by_name(model_goals(results))
+
+
 def test_missing_inputs_are_not_measured_never_met():
     goals = model_goals({})
     assert goals and all(g.value is None and g.met is None for g in goals)

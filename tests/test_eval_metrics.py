@@ -43,6 +43,15 @@ def test_smoothness_zero_on_plane_interior_and_positive_on_bump():
     assert smoothness(bumped, grid.faces) > base
 
 
+def test_smoothness_by_hand_on_the_square_and_without_a_vertex_no_face_uses():
+    """Unit square, diagonal 0-2: vertices 1 and 3 sit (1/2, 1/2) from their two neighbours' mean, 0 and 2 (2/3, 2/3)
+    from their three's: mean sqrt(2) (1/2 + 2/3) / 2; an extra vertex that no face uses changes nothing (it used to
+    count as its distance from the origin)."""
+    expected = np.sqrt(2.0) * (1 / 2 + 2 / 3) / 2
+    assert smoothness(SQUARE, SQUARE_FACES) == pytest.approx(expected)
+    assert smoothness(np.vstack([SQUARE, [[3.0, 4.0, 0.0]]]), SQUARE_FACES) == pytest.approx(expected)
+
+
 def test_collision_pct_counts_points_inside_a_sphere():
     sphere = trimesh.creation.icosphere(subdivisions=3)
     pts = np.concatenate([sphere.vertices[:10] * 0.9, sphere.vertices[10:40] * 1.1])

@@ -97,7 +97,7 @@ def evaluate_split(
 
     Returns {method: {garment_type: {metric: value, "frames": n}}} with methods ``name`` (the raw network
     output of ``model``, which has ``predict(samples)``), ``name+push`` (with the API's collision post-process,
-    when ``collision_margin``), "prior" (the LBS prior), "nearest" (each vertex moves with its nearest body
+    when ``collision_margin`` is not None), "prior" (the LBS prior), "nearest" (each vertex moves with its nearest body
     vertex) and "ground truth" (the simulation itself: the reference for normal consistency, smoothness and
     the collision counts, which flag some simulated cloth too on a coarse body mesh); with ``refine`` also
     ``name+refine`` and "prior+refine" (``garsim.refine`` after the network / after the prior alone).
@@ -120,10 +120,13 @@ def evaluate_split(
             predictions[f"{name}+push"] = [
                 postprocess(p, s, collision_margin, refine=False) for p, s in zip(predictions[name], samples)
             ]
-        if refine:
-            predictions[f"{name}+refine"] = [postprocess(p, s) for p, s in zip(predictions[name], samples)]
-    if refine and baselines:
-        predictions["prior+refine"] = [postprocess(p, s) for p, s in zip(predictions["prior"], samples)]
+        if refine and collision_margin is not None:
+            predictions[f"{name}+refine"] = [
+                postprocess(p, s, collision_margin) for p, s in zip(predictions[name], samples)
+            ]
+    if refine and baselines and collision_margin is not None:
+        prior = predictions["prior"]
+        predictions["prior+refine"] = [postprocess(p, s, collision_margin) for p, s in zip(prior, samples)]
     return score_predictions(samples, predictions, by)
 
 
@@ -134,17 +137,17 @@ def score_predictions(
     groups are the garment types by default, ``sample_groups``' labels of the groupings ``by`` otherwise.
 
     Metrics: ``garsim.eval.metrics.GarmentMetrics`` and ``correction_alignment`` (its cosine and gain); a method
-    named ``base+post`` (a post-processed row) leaves out the collision metrics its post-process enforces
-    (``POSTPROCESS_OPTIMISES``). Where the samples hold animations (>= 3 consecutive dynamic frames of a sequence)
-    every row also has ``jitter_mm`` (mean over them) and ``sequences``. Methods are ordered models first, then
-    "prior", "nearest", "ground truth".
+    named ``base+post`` (a post-processed row: ``post`` after the last "+") leaves out the collision metrics its
+    post-process enforces (``POSTPROCESS_OPTIMISES``). Where the samples hold animations (>= 3 consecutive dynamic
+    frames of a sequence) every row also has ``jitter_mm`` (mean over them) and ``sequences``. Methods are ordered
+    models first, then "prior", "nearest", "ground truth".
     """
     results: dict[str, dict[str, dict[str, float]]] = {}
     animations = _animations(samples)
     labels = [[*sample_groups(s, by), "all"] for s in samples]  # each sample's rows, the same for every method
     for method in sorted(predictions, key=lambda k: (k in ("prior", "nearest", "ground truth"), k)):
         preds = predictions[method]
-        enforced = POSTPROCESS_OPTIMISES.get(method.partition("+")[2], ())
+        enforced = POSTPROCESS_OPTIMISES.get(method.rpartition("+")[2], ()) if "+" in method else ()
         rows: dict[str, list[dict[str, float]]] = defaultdict(list)
         for s, p, groups in zip(samples, preds, labels):
             row = garment_metrics(p, s.target, s.garment_faces, s.body_target, s.body_faces).as_dict()
@@ -267,7 +270,10 @@ def paired_fabric_agreement(
     """Fig. 7 on paired groups (one template, four fabrics, same body and pose): simulated vs predicted mean
     distance to the body (mm) and mean fold angle (deg) per fabric, the share of neighbouring fabric pairs
     (silk-cotton, cotton-denim, denim-leather) whose simulated values differ by more than the gap and whose
-    predictions are ordered the same way, and the predicted / simulated spread (lightest to stiffest).
+    predictions are ordered the same way, and the predicted / simulated spread (lightest to stiffest): over the
+    groups whose simulated spread passes the gap, sum_g sign(s_g) p_g / sum_g |s_g| with s_g, p_g the simulated and
+    predicted spreads (a ratio of means, so a group whose spread barely passes the gap does not weigh more than the
+    rest; a predicted spread the wrong way counts against it).
     Also the share of the physical fabrics midway between neighbouring presets (``interpolate_fabric(a, b, 0.5)``)
     whose predicted distance and fold angle lie between the two presets' predictions (within ``between_tol`` mm or
     deg): the model issue's "values between two presets give results between theirs"."""
@@ -288,7 +294,7 @@ def paired_fabric_agreement(
                 low, high = sorted((pred[i], pred[i + 1]))
                 between.append(low - between_tol <= mid[i] <= high + between_tol)
         if abs(sim_d[-1] - sim_d[0]) > min_gap_mm:
-            spread.append((pred_d[-1] - pred_d[0]) / (sim_d[-1] - sim_d[0]))
+            spread.append((pred_d[-1] - pred_d[0], sim_d[-1] - sim_d[0]))
         rows.append(
             {
                 "garment": samples[0].garment_type,
@@ -305,10 +311,18 @@ def paired_fabric_agreement(
         "groups": len(complete),
         "pairs_over_gap": pairs,
         "ordering_agreement": agree / pairs if pairs else None,
-        "spread_ratio": float(np.mean(spread)) if spread else None,
+        "spread_ratio": _spread_ratio(spread),
         "midway_between": float(np.mean(between)) if between else None,
         "rows": rows,
     }
+
+
+def _spread_ratio(spreads: list[tuple[float, float]]) -> float | None:
+    """sum sign(s) p / sum |s| over (predicted p, simulated s) spreads; None without any."""
+    if not spreads:
+        return None
+    pred, sim = np.array(spreads, dtype=np.float64).T
+    return float(np.sum(np.sign(sim) * pred) / np.sum(np.abs(sim)))
 
 
 TABLE_COLUMNS: tuple[tuple[str, str, str], ...] = (

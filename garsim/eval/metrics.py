@@ -4,7 +4,8 @@ With x the predicted garment (N, 3), x̄ the ground truth, E its unique mesh edg
 
 - Euclidean error (mm): 1000 · mean_i ‖x_i − x̄_i‖.
 - Normal consistency (Eq. 5): mean over adjacent face pairs (f, g) of 1 − n_f · n_g.
-- Smoothness (Eq. 4): mean_i ‖x_i − mean_{j ∈ N(i)} x_j‖ (the uniform Laplacian, metres).
+- Smoothness (Eq. 4): mean_i ‖x_i − mean_{j ∈ N(i)} x_j‖ (the uniform Laplacian, metres) over the vertices the
+  faces use.
 - Collision (%), DeePSD's count: 100 · share of i with (x_i − b_q) · n_q < 0, q the nearest body VERTEX and n_q
   its area-weighted vertex normal.
 - HOOD collision (%): 100 · share of i with (x_i − c_i) · n_f < 0, c_i the closest point of the body surface
@@ -71,8 +72,11 @@ def normal_consistency(vertices: np.ndarray, faces: np.ndarray) -> float:
 
 
 def smoothness(vertices: np.ndarray, faces: np.ndarray) -> float:
+    """Eq. 4 over the vertices the faces use (a vertex of no face has no neighbours' mean to compare with)."""
+    used = np.zeros(len(vertices), dtype=bool)
+    used[np.asarray(faces).ravel()] = True
     lap = uniform_laplacian(faces, len(vertices)) @ np.asarray(vertices, np.float64)
-    return float(np.linalg.norm(lap, axis=1).mean())
+    return float(np.linalg.norm(lap[used], axis=1).mean())
 
 
 def collision_pct(vertices: np.ndarray, body_vertices: np.ndarray, body_faces: np.ndarray) -> float:

@@ -108,11 +108,12 @@ def edge_adjacency(edges: np.ndarray, num_vertices: int, weights: np.ndarray | N
 
 
 def uniform_laplacian(faces: np.ndarray, num_vertices: int) -> sp.csr_matrix:
-    """Uniform Laplacian L = I - D^-1 A (rows sum to zero); L @ V is each vertex minus its neighbours' mean."""
+    """Uniform Laplacian L = I - D^-1 A (rows sum to zero); L @ V is each vertex minus its neighbours' mean, and 0 at
+    a vertex no face uses (its row is empty)."""
     adj = edge_adjacency(unique_edges(faces), num_vertices)
     deg = np.asarray(adj.sum(axis=1)).ravel()
     inv = np.where(deg > 0, 1.0 / np.maximum(deg, 1), 0.0)
-    return (sp.identity(num_vertices, format="csr") - sp.diags(inv) @ adj).tocsr()
+    return (sp.diags((deg > 0).astype(np.float64)) - sp.diags(inv) @ adj).tocsr()
 
 
 def surface_smoother(vertices: np.ndarray, faces: np.ndarray, sigma: float) -> Callable[[np.ndarray], np.ndarray]:
