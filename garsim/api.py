@@ -16,7 +16,7 @@ from garsim.garments.fabrics import Fabric, fabric_from_values, get_fabric
 from garsim.garments.garment import Garment
 from garsim.garments.remesh import BarycentricMap, barycentric_map, decimate, transfer_barycentric
 from garsim.geometry.cache import ContentCache, content_key
-from garsim.geometry.io import UNITS, MeshError, as_mesh, from_internal, to_internal
+from garsim.geometry.io import UNITS, MeshError, as_mesh, from_internal, to_internal, y_up_to_z_up, z_up_to_y_up
 from garsim.geometry.mesh import cached_vertex_normals, top_border_loops, weld, weld_index
 from garsim.geometry.proximity import push_outside
 
@@ -90,10 +90,38 @@ BODY_HEIGHT_RANGE = (0.4, 2.6)
 FAR_FROM_BODY = 0.25
 """m: a garment whose median vertex is farther than this from the canonical body does not surround it (lenient:
 the hem of a full maxi skirt hangs well beyond 10 cm)."""
+INSIDE_LIMIT = 0.05
+"""Share of a garment's vertices inside the canonical body (winding number) above which it is not draped on that
+body (garments draped on it have none; one moved 10 cm sideways, shrunk to 70% or on another pose has 8-100%)."""
+BETTER_FIT = 0.7
+"""A garment turned between Y-up and Z-up, or scaled by a power of ten, that lies this much nearer the canonical
+body (median distance), within 10 cm of it, with at most 1% inside it and a garment's size (its bounding box's
+diagonal 0.1-1.5x the body's height) is in another axis or unit than the body: refused. On the fixture's and the
+external set's garments the best such reading is 1.15-4.9x farther than the garment as given."""
+_READINGS: tuple[tuple[str, Any], ...] = (
+    ("turned from Y-up to Z-up", y_up_to_z_up),
+    ("turned from Z-up to Y-up", z_up_to_y_up),
+    *((f"scaled by {10.0**k:g}", lambda v, k=k: v * 10.0**k) for k in (-3, -2, -1, 1, 2, 3)),
+)
 
 
-def check_scene(body: np.ndarray, garment: np.ndarray, up: str = "z", units: str = "m") -> None:
-    """Refuse a body that is plainly in another axis or unit, or a garment that does not surround it.
+def _median_distance(body: np.ndarray, garment: np.ndarray) -> float:
+    """Median distance (m) of the garment's vertices to the body's."""
+    from garsim.geometry.proximity import cached_tree
+
+    return float(np.median(cached_tree(body).query(garment)[0]))
+
+
+def _inside_share(body: np.ndarray, body_faces: np.ndarray, garment: np.ndarray) -> float:
+    """Share of the garment's vertices inside the body (winding number)."""
+    from garsim.geometry.inside import inside_mask
+
+    return float(inside_mask(garment, body, body_faces).mean())
+
+
+def check_scene(body: np.ndarray, body_faces: np.ndarray, garment: np.ndarray, up: str = "z", units: str = "m") -> None:
+    """Refuse a body that is plainly in another axis or unit, or a garment that is not draped on it: in another
+    axis or unit than the body, far from it, or partly inside it.
 
     ``body`` and ``garment`` are in garsim's frame (metres, Z up), converted from the input's ``up`` and
     ``units``; the message names the flag that fixes the input."""
@@ -116,14 +144,62 @@ def check_scene(body: np.ndarray, garment: np.ndarray, up: str = "z", units: str
         hint = fits[0] if fits else None
         fix = f"pass units='{hint}' (CLI: --units {hint})" if hint else "give the meshes in metres, cm or mm"
         raise MeshError(f"the canonical body is {raw:.3g} {units} tall (units='{units}'), not a person: {fix}")
-    from garsim.geometry.proximity import cached_tree
-
-    dist = cached_tree(body).query(garment)[0]
-    if float(np.median(dist)) > FAR_FROM_BODY:
+    median = _median_distance(body, garment)
+    for reading, move in _READINGS:
+        other = move(garment)
+        size = float(np.linalg.norm(other.max(axis=0) - other.min(axis=0))) / height
+        if not 0.1 <= size <= 1.5:
+            continue
+        other_median = _median_distance(body, other)
+        if other_median < min(BETTER_FIT * median, 0.1) and _inside_share(body, body_faces, other) <= 0.01:
+            raise MeshError(
+                f"the garment is in another axis or unit than the canonical body: {reading} it would lie "
+                f"{100 * other_median:.1f} cm from the body instead of {100 * median:.1f} cm; give every mesh in one "
+                "axis and unit (up= / units= apply to all; CLI: --up / --units)"
+            )
+    if median > FAR_FROM_BODY:
         raise MeshError(
-            f"the garment's median vertex is {100 * float(np.median(dist)):.0f} cm from the canonical body: "
-            "it must be draped on the canonical body (same position, axis and units; a Y-up or cm/mm file: pass "
-            "up= / units=, CLI: --up / --units)"
+            f"the garment's median vertex is {100 * median:.0f} cm from the canonical body: it must be draped on "
+            "the canonical body (same position, axis and units; a Y-up or cm/mm file: pass up= / units=, CLI: "
+            "--up / --units)"
+        )
+    inside = _inside_share(body, body_faces, garment)
+    if inside > INSIDE_LIMIT:
+        raise MeshError(
+            f"{100 * inside:.0f}% of the garment's vertices are inside the canonical body: it must be draped on the "
+            "canonical body (the pose and body it was made on, e.g. not the target)"
+        )
+
+
+TARGET_SCALE_RANGE = (0.5, 2.0)
+"""The target body's RMS distance from its centroid over the canonical body's: a posed copy of one mesh (0.73-1.04
+over the sampler's whole pose range here), not one in other units (10x to 1000x)."""
+MAX_TILT_DEG = 45.0
+"""Largest angle between the vertical and the vertical turned by the rotation that best aligns the canonical body with
+the target (Kabsch, about their centroids): up to 34 deg over the sampler's whole pose range here, 58-64 deg for a
+Y-up target read as Z-up."""
+
+
+def check_target(canonical: np.ndarray, target: np.ndarray) -> None:
+    """Refuse a target body (garsim's frame, the canonical body's topology) in another unit or axis than the
+    canonical body."""
+    step = max(1, len(canonical) // 2000)  # every step-th vertex: plenty for a whole body's size and turn
+    c = np.asarray(canonical[::step], dtype=np.float64)
+    t = np.asarray(target[::step], dtype=np.float64)
+    c, t = c - c.mean(axis=0), t - t.mean(axis=0)
+    scale = float(np.sqrt((t**2).sum(1).mean() / (c**2).sum(1).mean()))
+    if not TARGET_SCALE_RANGE[0] <= scale <= TARGET_SCALE_RANGE[1]:
+        raise MeshError(
+            f"the target body is {scale:.3g}x the size of the canonical body: give every body in the same units "
+            "(a posed copy of the canonical body mesh)"
+        )
+    u, _, vt = np.linalg.svd(c.T @ t)
+    rotation = (u @ np.diag([1.0, 1.0, np.sign(np.linalg.det(u @ vt))]) @ vt).T  # canonical -> target
+    tilt = float(np.degrees(np.arccos(np.clip(rotation[2, 2], -1.0, 1.0))))
+    if tilt > MAX_TILT_DEG:
+        raise MeshError(
+            f"the target body is turned {tilt:.0f} deg away from the canonical body's vertical: give every mesh in "
+            "one axis (up= applies to all; CLI: --up)"
         )
 
 
@@ -197,7 +273,7 @@ class Scene:
         units: str,
     ) -> Scene:
         """A new Scene of meshes already in garsim's frame, once their relation and the pins are checked."""
-        check_scene(bc, g, up=up, units=units)
+        check_scene(bc, bf, g, up=up, units=units)
         index = weld_index(g, gf)
         mask = None if isinstance(pinned, str) else _pinned_mask(pinned, len(g))  # the user's vertices
         if index is not None:
@@ -235,6 +311,7 @@ class Scene:
                 f"canonical body ({len(bc)} vertices, {len(bf)} faces) and target body ({len(bt)} vertices, "
                 f"{len(bf_t)} faces) must share one topology: pose the same body mesh"
             )
+        check_target(bc, bt)
         return bt
 
     def _on_canonical_faces(self, body_target: Any) -> np.ndarray | None:

@@ -277,14 +277,16 @@ def test_cli_choices_match_the_library():
 
 @pytest.fixture(scope="module")
 def scene(tmp_path_factory):
-    """A standing ellipsoid 'body' (1.7 m, Z up, metres), the same body moved, and a garment around its waist."""
+    """A standing ellipsoid 'body' (1.7 m, Z up, metres), the same body moved, and a garment around its waist (an
+    open band of a wider ellipsoid: its caps would be inside the body)."""
     folder = tmp_path_factory.mktemp("scene")
     body = trimesh.creation.icosphere(subdivisions=3)
     body.apply_scale([0.2, 0.15, 0.85])
     body.apply_translation([0.0, 0.0, 0.85])
-    garment = trimesh.creation.icosphere(subdivisions=2)
-    garment.apply_scale([0.24, 0.19, 0.3])
-    garment.apply_translation([0.0, 0.0, 0.9])
+    shell = trimesh.creation.icosphere(subdivisions=3)
+    shell.apply_scale([0.24, 0.19, 0.3])
+    shell.apply_translation([0.0, 0.0, 0.9])
+    garment = shell.submesh([np.flatnonzero((np.abs(shell.vertices[shell.faces][:, :, 2] - 0.9) < 0.12).all(1))])[0]
     moved = body.copy()
     moved.apply_translation([0.0, 0.0, 0.1])
     meshes = {"c": body, "t": moved, "g": garment}
@@ -303,6 +305,7 @@ def _bad_inputs(folder, meshes):
     """name -> (files to write {name: writer}, argument changes, expected text in the message)."""
     g = meshes["g"]
     gv, gf = np.asarray(g.vertices), np.asarray(g.faces)
+    c, cf = np.asarray(meshes["c"].vertices), np.asarray(meshes["c"].faces)
     nan = gv.copy()
     nan[3] = np.nan
     oob = gf.copy()
@@ -356,6 +359,31 @@ def _bad_inputs(folder, meshes):
             {"--garment": "far.obj"},
             "from the canonical body",
         ),
+        "garment alone in another axis": (
+            {"g_y.obj": lambda p: _write_obj(p, gv @ rot.T, gf)},
+            {"--garment": "g_y.obj"},
+            "another axis or unit",
+        ),
+        "garment alone in another unit": (
+            {"g_cm.obj": lambda p: _write_obj(p, gv * 100, gf)},
+            {"--garment": "g_cm.obj"},
+            "another axis or unit",
+        ),
+        "garment partly inside the body": (
+            {"in.obj": lambda p: _write_obj(p, gv * [0.8, 0.8, 1.0], gf)},
+            {"--garment": "in.obj"},
+            "inside the canonical body",
+        ),
+        "target in another unit": (
+            {"t_mm.obj": lambda p: _write_obj(p, np.asarray(meshes["t"].vertices) * 1000, cf)},
+            {"--target": "t_mm.obj"},
+            "the size of the canonical body",
+        ),
+        "target in another axis": (
+            {"t_y.obj": lambda p: _write_obj(p, np.asarray(meshes["t"].vertices) @ rot.T, cf)},
+            {"--target": "t_y.obj"},
+            "away from the canonical body's vertical",
+        ),
         "unknown fabric": ({}, {"--fabric": "wool"}, "unknown fabric 'wool'"),
         "fabric value not a number": ({}, {"--fabric": "bending=soft"}, "'bending=soft' is not key=number"),
         "fabric values incomplete": ({}, {"--fabric": "bending=2e-5,density=0.2"}, "missing stretch"),
@@ -377,7 +405,11 @@ def _bad_inputs(folder, meshes):
         ),
         "output is a folder": ({"outdir.obj": lambda p: p.mkdir()}, {"--out": "outdir.obj"}, "is a folder"),
         "png extension": ({}, {"--png": "out/draped.jpg"}, "--png"),
-        "--pinned auto on a closed garment": ({}, {"--pinned": "auto"}, "no border loop"),
+        "--pinned auto on a closed garment": (
+            {"closed.obj": lambda p: _write_obj(p, (c - [0.0, 0.0, 0.85]) * 1.15 + [0.0, 0.0, 0.85], cf)},
+            {"--pinned": "auto", "--garment": "closed.obj"},
+            "no border loop",
+        ),
         "--format disagrees with --out": ({}, {"--format": "glb"}, "--format glb disagrees"),
         "output over an input": (
             {"g2.obj": lambda p: p.write_text(text)},
@@ -420,6 +452,11 @@ def _one_error_line(capsys) -> str:
         "--units cm on a metre file",
         "output checked before the inputs",
         "garment far from the body",
+        "garment alone in another axis",
+        "garment alone in another unit",
+        "garment partly inside the body",
+        "target in another unit",
+        "target in another axis",
         "unknown fabric",
         "fabric value not a number",
         "fabric values incomplete",
