@@ -232,7 +232,10 @@ class StaticGraph:
         gidx, ei = garment_topology(g, faces, cfg.knn_garment)
         snd, rcv = ei[0], ei[1]
         mass = np.zeros(len(used))
-        np.maximum.at(mass, slot, w.data)
+        referenced = np.zeros(n, dtype=bool)  # a vertex no face uses (a stray OBJ 'v' line) marks no body part
+        referenced[np.asarray(faces).ravel()] = True
+        keep = referenced[w.row]
+        np.maximum.at(mass, slot[keep], w.data[keep])
         self.edge_garment = (gf[rcv] - gf[snd]).astype(np.float32)
         self.arrays = {
             "pos": g.copy(),
