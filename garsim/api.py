@@ -17,7 +17,7 @@ from garsim.garments.garment import Garment
 from garsim.garments.remesh import BarycentricMap, barycentric_map, decimate, transfer_barycentric
 from garsim.geometry.cache import ContentCache, content_key
 from garsim.geometry.io import UNITS, MeshError, as_mesh, from_internal, to_internal, y_up_to_z_up, z_up_to_y_up
-from garsim.geometry.mesh import cached_vertex_normals, top_border_loops, weld, weld_index
+from garsim.geometry.mesh import cached_vertex_normals, piece_count, top_border_loops, weld, weld_index
 from garsim.geometry.proximity import push_outside
 
 WEIGHTS_DIR = Path(__file__).parent / "weights"
@@ -280,6 +280,13 @@ class Scene:
             g, gf = weld(g, gf, index)
             if mask is not None:  # a welded vertex is pinned when any of its copies is
                 mask = np.bincount(index[mask], minlength=len(g)) > 0
+        pieces = piece_count(gf, len(g))
+        if pieces > 1:
+            log.warning(
+                "the garment has %d separate pieces; they are draped as one garment (each piece's drape depends on "
+                "the others): drape separate garments one at a time",
+                pieces,
+            )
         if isinstance(pinned, str):
             if pinned.strip().lower() != "auto":
                 raise ValueError(f"pinned must be 'auto', vertex indices or a boolean mask, got {pinned!r}")

@@ -312,3 +312,18 @@ def test_scenes_are_reused_by_content_and_never_stale(anny_body, scene, monkeypa
     no_pins = api.Scene.make(body_c, (garment, g.faces)).pinned  # other settings, another scene
     assert len(checks) == 3
     assert pins.any() and not no_pins.any()
+
+
+def test_a_garment_in_several_pieces_is_draped_with_a_warning(anny_body, scene, caplog):
+    """A skirt cut in two by dropping a band of its faces: draped, with a warning that the pieces are one garment."""
+    import logging
+
+    c, t, g = scene
+    z = g.vertices[g.faces].mean(axis=1)[:, 2]
+    middle = np.median(z)
+    faces = g.faces[np.abs(z - middle) > 0.02]
+    body_c, body_t = (c.vertices, anny_body.faces), (t.vertices, anny_body.faces)
+    with caplog.at_level(logging.WARNING, logger="garsim.api"):
+        out = GarSim.prior_only().drape(body_c, body_t, (g.vertices, faces))
+    assert out.shape == g.vertices.shape
+    assert "2 separate pieces" in caplog.text

@@ -11,6 +11,7 @@ from garsim.geometry.mesh import (
     face_areas,
     face_normals,
     face_pairs,
+    piece_count,
     surface_smoother,
     top_border_loops,
     uniform_laplacian,
@@ -195,3 +196,9 @@ def test_weld_leaves_short_edges_and_distant_vertices_and_drops_collapsed_and_re
     index = np.array([0, 1, 2, 3, 2])
     _, faces = weld(v, f, index)
     np.testing.assert_array_equal(faces, SQUARE_F)
+
+
+def test_piece_count_counts_edge_connected_faces():
+    assert piece_count(SQUARE_F, 4) == 1
+    assert piece_count(np.array([[0, 1, 2], [3, 4, 5]]), 7) == 2  # vertex 6 in no face: no piece
+    assert piece_count(np.array([[0, 1, 2], [2, 3, 4]]), 5) == 1  # touching at a vertex: one piece

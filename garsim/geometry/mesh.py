@@ -183,6 +183,20 @@ def border_loops(faces: np.ndarray) -> list[np.ndarray]:
     return [verts[labels == c] for c in range(ncomp)]
 
 
+def piece_count(faces: np.ndarray, num_vertices: int) -> int:
+    """How many separate pieces (edge-connected sets of faces) a mesh has."""
+    from scipy.sparse.csgraph import connected_components
+
+    f = np.asarray(faces, dtype=np.int64)
+    if len(f) == 0:
+        return 0
+    used = np.unique(f)
+    e = unique_edges(f)
+    adj = sp.coo_matrix((np.ones(len(e)), (e[:, 0], e[:, 1])), shape=(num_vertices, num_vertices))
+    labels = connected_components(adj, directed=False)[1]
+    return len(np.unique(labels[used]))
+
+
 TOP_LOOP_BAND = 0.04
 """m: a border loop is a top loop when its highest vertex is within this of the highest border vertex (the band
 the data generator pins shoulder-hung garments in, ``physics.generate.SHOULDER_PIN_BAND``)."""
