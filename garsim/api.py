@@ -74,15 +74,30 @@ def fabric_fields(fabric: Any) -> tuple[str, dict[str, float] | None]:
     if isinstance(fabric, dict):
         fabric = fabric_from_values(dict(fabric))
     if isinstance(fabric, Fabric):
-        return (
-            (fabric.name, None)
-            if fabric.name in FABRICS and fabric == get_fabric(fabric.name)
-            else (CUSTOM_FABRIC, fabric.values())
-        )
+        if fabric.name in FABRICS and fabric == get_fabric(fabric.name):
+            return fabric.name, None
+        _warn_outside_presets(fabric)
+        return CUSTOM_FABRIC, fabric.values()
     raise ValueError(
         f"fabric must be a preset name ({', '.join(FABRICS)}), a Fabric or a dict of physical values, "
         f"got {type(fabric).__name__}"
     )
+
+
+def _warn_outside_presets(fabric: Fabric) -> None:
+    """Log a warning for physical values the network did not see: beyond silk .. leather (10% of that log range)."""
+    for key in ("bending", "density", "stretch"):
+        lo, hi = (float(np.log(getattr(get_fabric(p), key))) for p in ("silk", "leather"))
+        t = (float(np.log(getattr(fabric, key))) - lo) / (hi - lo)
+        if not -0.1 <= t <= 1.1:
+            log.warning(
+                "fabric %s=%.3g lies outside silk .. leather (%.3g .. %.3g), the range the model was trained on: "
+                "its drape extrapolates",
+                key,
+                getattr(fabric, key),
+                getattr(get_fabric("silk"), key),
+                getattr(get_fabric("leather"), key),
+            )
 
 
 BODY_HEIGHT_RANGE = (0.4, 2.6)

@@ -47,7 +47,8 @@ def fabric_arg(text: str) -> str | dict[str, float]:
 
 FABRIC_HELP = (
     f"a preset ({', '.join(FABRIC_CHOICES)}) or physical values, e.g. bending=2e-5,density=0.2,stretch=3000 "
-    "(N·m, kg/m², N/m; optionally friction, bending_damping, stretch_damping, thickness)"
+    "(N·m, kg/m², N/m; optionally friction, bending_damping, stretch_damping, thickness, which only the "
+    "simulator of `garsim data generate` reads: the model's drape depends on bending, density and stretch)"
 )
 FAMILY_CHOICES: tuple[str, ...] = ("skirt", "top", "tshirt", "longsleeve", "trousers", "dress")
 """The garment families (``garsim.data.sample.GARMENT_TYPES``, repeated for the same reason)."""

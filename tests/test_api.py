@@ -327,3 +327,15 @@ def test_a_garment_in_several_pieces_is_draped_with_a_warning(anny_body, scene, 
         out = GarSim.prior_only().drape(body_c, body_t, (g.vertices, faces))
     assert out.shape == g.vertices.shape
     assert "2 separate pieces" in caplog.text
+
+
+def test_fabric_values_beyond_the_presets_log_that_the_drape_extrapolates(caplog):
+    import logging
+
+    from garsim.api import fabric_fields
+
+    with caplog.at_level(logging.WARNING, logger="garsim.api"):
+        assert fabric_fields({"bending": 2e-5, "density": 0.2, "stretch": 6e3})[0] == "custom"
+        assert not caplog.records  # between silk and leather
+        fabric_fields({"bending": 1e3, "density": 0.2, "stretch": 6e3})
+    assert "bending=1e+03 lies outside silk .. leather" in caplog.text
