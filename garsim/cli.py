@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import argparse
 import ast
+import contextlib
 import dataclasses
 import json
 import logging
@@ -50,6 +51,8 @@ FABRIC_HELP = (
     "(N·m, kg/m², N/m; optionally friction, bending_damping, stretch_damping, thickness, which only the "
     "simulator of `garsim data generate` reads: the model's drape depends on bending, density and stretch)"
 )
+MOTION_FRAMES = 30
+"""``garsim animate --frames``' default: the frames of a --motion."""
 FAMILY_CHOICES: tuple[str, ...] = ("skirt", "top", "tshirt", "longsleeve", "trousers", "dress")
 """The garment families (``garsim.data.sample.GARMENT_TYPES``, repeated for the same reason)."""
 MODEL_CHOICES: tuple[str, ...] = ("garsim", "deepsd")
@@ -313,6 +316,8 @@ def _read_pinned(path: str) -> object:
     p = Path(path)
     if not p.is_file():
         raise ValueError(f"--pinned {p}: no such file (give a text file of garment vertex indices)")
+    if not p.read_text(errors="replace").split():
+        raise ValueError(f"--pinned {p}: the file is empty (give garment vertex indices, or --pinned auto)")
     try:
         values = np.loadtxt(p, dtype=np.float64, ndmin=1).ravel()
     except ValueError as exc:
@@ -377,8 +382,13 @@ def cmd_animate(args: argparse.Namespace) -> int:
             "give one of --motion NAME or --poses FILE (the default Anny body), or --canonical and --targets (a "
             "folder of body OBJs or an .npz with an array 'vertices' of shape (T, V, 3))"
         )
-    if (args.motion and args.frames < 2) or args.fps <= 0:
-        raise ValueError(f"--frames must be >= 2 and --fps > 0, got {args.frames} and {args.fps}")
+    if args.frames is not None and not args.motion:
+        raise ValueError("--frames sets the length of a --motion; --poses and --targets give their own frames")
+    frames = MOTION_FRAMES if args.frames is None else args.frames
+    if args.motion and frames < 2:
+        raise ValueError(f"--frames must be >= 2, got {frames}")
+    if args.fps <= 0:
+        raise ValueError(f"--fps must be > 0, got {args.fps}")
     if args.interpolate is not None and (not args.poses or args.interpolate < 2):
         raise ValueError("--interpolate N (N >= 2) resamples the keyframes of --poses FILE")
     import numpy as np
@@ -406,7 +416,7 @@ def cmd_animate(args: argparse.Namespace) -> int:
         from garsim.bodies import poses
 
         if args.motion:
-            sequence = poses.motion(args.motion, args.frames)  # an unknown motion fails before Anny is built
+            sequence = poses.motion(args.motion, frames)  # an unknown motion fails before Anny is built
         else:
             sequence = poses.read_pose_sequence(args.poses)
             if args.interpolate is not None:
@@ -838,7 +848,7 @@ def build_parser() -> argparse.ArgumentParser:
     p = command("animate", "drape a garment over a pose sequence; write GLB, USD, PC2 (+OBJ), MP4 or GIF")
     p.add_argument("--garment", required=True, help="garment mesh draped on the canonical body")
     p.add_argument("--motion", choices=MOTION_CHOICES, help="a motion of the library, on the default Anny body")
-    p.add_argument("--frames", type=int, default=30, help="frames of a --motion")
+    p.add_argument("--frames", type=int, default=None, help=f"frames of a --motion (default {MOTION_FRAMES})")
     p.add_argument(
         "--poses",
         metavar="FILE",
@@ -1176,6 +1186,10 @@ def main(argv: list[str] | None = None) -> int:
     logging.basicConfig(level=logging.INFO if args.verbose else logging.WARNING, format="%(levelname)s %(message)s")
     try:
         return int(args.func(args) or 0)
+    except BrokenPipeError:  # the reader of stdout went away (`garsim data info DIR | head`): stop quietly
+        with contextlib.suppress(OSError, ValueError):  # nor complain when Python flushes stdout at exit
+            os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return 1
     except _USER_ERRORS as exc:
         print(f"garsim {args.command}: error: {_one_line(exc)}", file=sys.stderr)
         return 2

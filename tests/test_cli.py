@@ -392,6 +392,7 @@ def _bad_inputs(folder, meshes):
             {"--pinned": "pins.txt"},
             "pinned indices",
         ),
+        "pinned file empty": ({"pins.txt": lambda p: p.write_text("\n")}, {"--pinned": "pins.txt"}, "is empty"),
         "pinned file not numbers": (
             {"pins.txt": lambda p: p.write_text("waist\n")},
             {"--pinned": "pins.txt"},
@@ -461,6 +462,7 @@ def _one_error_line(capsys) -> str:
         "fabric value not a number",
         "fabric values incomplete",
         "pinned index out of range",
+        "pinned file empty",
         "pinned file not numbers",
         "unsupported output extension",
         "output folder under a file",
@@ -624,6 +626,12 @@ def test_drape_pinned_auto_keeps_the_top_loop_on_the_prior(scene, tmp_path):
         ("no bodies", ["--out", "walk.glb"], "--motion NAME"),
         ("motion and bodies", ["--motion", "walk", "--canonical", "c.obj", "--out", "w.glb"], "not both"),
         ("one frame", ["--motion", "walk", "--frames", "1", "--out", "walk.glb"], "--frames"),
+        (
+            "frames without a motion",
+            ["--canonical", "{c}", "--targets", "none/", "--frames", "10", "--out", "w.glb"],
+            "--frames sets the length of a --motion",
+        ),
+        ("no fps", ["--motion", "walk", "--fps", "0", "--out", "walk.glb"], "--fps must be > 0, got 0"),
         ("missing targets", ["--canonical", "{c}", "--targets", "none/", "--out", "w.glb"], "no such file"),
         ("empty targets folder", ["--canonical", "{c}", "--targets", "empty/", "--out", "w.glb"], "no .obj"),
         ("targets of another topology", ["--canonical", "{c}", "--targets", "other/", "--out", "w.glb"], "topology"),
@@ -848,3 +856,15 @@ def test_eval_compare_scores_a_second_model_on_the_same_samples(tmp_path, capsys
     assert main(["eval", "--data", fixture, "--compare", str(tmp_path)]) == 2
     line = _one_error_line(capsys)
     assert "--compare" in line and "not a model folder" in line
+
+
+def test_a_reader_that_goes_away_ends_the_command_quietly(monkeypatch, capsys):
+    """`garsim data info DIR | head`: the closed pipe ends the command with status 1 and no error message."""
+    import garsim.cli as cli
+
+    def closed(args):
+        raise BrokenPipeError(32, "Broken pipe")
+
+    monkeypatch.setattr(cli, "cmd_data_info", closed)
+    assert main(["data", "info", "anything"]) == 1
+    assert capsys.readouterr().err == ""

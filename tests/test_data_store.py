@@ -170,3 +170,12 @@ def test_verify_reports_torn_lines_and_orphans_and_everything_else(tmp_path):
     assert "line 5" in problems[2] and "torn" in problems[2]
     assert problems[3].startswith("orphan") and "s3.npz" in problems[3]
     assert [e["id"] for e in store.entries()] == ["s0", "s1", "s2"]  # readers skip what verify reports
+
+
+def test_reading_a_folder_that_is_not_a_dataset_or_an_unknown_split_is_refused(tmp_path):
+    from pathlib import Path
+
+    with pytest.raises(StoreError, match="not a garsim dataset folder"):
+        DatasetStore(tmp_path / "typo").samples()
+    with pytest.raises(ValueError, match="split must be one of train, test, ood"):
+        DatasetStore(Path(__file__).parent / "fixtures" / "dataset_v2").samples("bogus")

@@ -30,6 +30,7 @@ from garsim.atomic import atomic_write_bytes
 from garsim.data.sample import Sample
 
 MANIFEST = "manifest.jsonl"
+SPLITS: tuple[str, ...] = ("train", "test", "ood")
 REJECTED = "rejected.jsonl"
 RESOLUTIONS = ("full", "low")
 ENTRY_KEYS = ("id", "file", "sha256", "bytes", "split", "garment_type", "fabric", "body_faces")
@@ -242,7 +243,19 @@ class DatasetStore:
             meta=meta,
         )
 
+    def _require_manifest(self) -> None:
+        """Raise StoreError unless the folder holds a manifest (a dataset that can be read)."""
+        if not (self.root / MANIFEST).exists():
+            raise StoreError(
+                f"{self.root} is not a garsim dataset folder (no {MANIFEST}); "
+                "make one with `garsim data generate --out DIR`"
+            )
+
     def sequences(self, split: str | None = None) -> Iterator[SequenceRecord]:
+        """The stored sequences (of one split: train, test or ood); a folder without a manifest is refused."""
+        self._require_manifest()
+        if split is not None and split not in SPLITS:
+            raise ValueError(f"split must be one of {', '.join(SPLITS)} (or None: all), got {split!r}")
         for entry in self.entries():
             if split is None or entry["split"] == split:
                 yield self.read_sequence(entry)
@@ -293,11 +306,7 @@ class DatasetStore:
     def info(self) -> dict[str, Any]:
         """What the dataset holds: samples (settled / dynamic) per split, family, construction, fabric, canonical
         pose; paired-fabric groups; acceptance rate and CPU seconds per family; vertex and phenotype ranges."""
-        if not (self.root / MANIFEST).exists():
-            raise StoreError(
-                f"{self.root} is not a garsim dataset folder (no {MANIFEST}); "
-                "make one with `garsim data generate --out DIR`"
-            )
+        self._require_manifest()
         entries = self.entries()
         rejected = self.entries(REJECTED)
         samples: Counter[str] = Counter()
