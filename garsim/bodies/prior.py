@@ -11,6 +11,8 @@ continuous function of the garment and the bodies.
 
 from __future__ import annotations
 
+import logging
+
 import numpy as np
 import scipy.sparse as sp
 
@@ -18,6 +20,8 @@ from garsim.bodies.base import BodyModel, PosedBody
 from garsim.geometry.mesh import unique_edges
 from garsim.geometry.proximity import soft_anchor
 from garsim.geometry.skinning import apply_transforms
+
+log = logging.getLogger(__name__)
 
 
 def _ring_matrices(faces: np.ndarray, num_vertices: int) -> tuple[np.ndarray, sp.csr_matrix, sp.csr_matrix]:
@@ -136,6 +140,13 @@ class MeshPairPrior:
         self.faces = faces
         rig = match_anny_rig(len(canonical), faces)
         self.lbs = None if rig is None else RecoveredPrior(self.garment, self.canonical, *rig)
+        if rig is None:
+            log.info(
+                "the body (%d vertices, %d faces) is not in Anny's topology and vertex order: the rig-free prior "
+                "(an Anny body re-saved in another vertex order, e.g. through STL, loses the skinning prior)",
+                len(canonical),
+                len(faces),
+            )
 
     def __call__(self, target: np.ndarray) -> np.ndarray:
         t = np.asarray(target, dtype=np.float64) - self.centre
