@@ -295,7 +295,9 @@ def cmd_drape(args: argparse.Namespace) -> int:
     sim = GarSim.prior_only() if args.prior_only else GarSim.pretrained()
     for sample, path, png_path in zip(samples, outs, pngs):
         pred = scene.unweld(sim.predict(sample))  # on the file's vertices (coincident ones were draped as one)
-        verts = from_internal(pred, args.up, args.units).astype(np.float32)
+        # in the input's units, but glTF's are metres (as `garsim animate` writes them)
+        units = "m" if path.suffix.lower() in (".glb", ".gltf") else args.units
+        verts = from_internal(pred, args.up, units).astype(np.float32)
         if png_path is not None:  # the render is the likelier of the two writes to fail: before the mesh
             from garsim.geometry.render import render_views
 
@@ -840,7 +842,12 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument("--png", help="also render target body + draped garment to this PNG (with several targets: folder)")
     p.add_argument("--up", choices=("z", "y"), default="z", help="up axis of the input and output (Blender/glTF: y)")
-    p.add_argument("--units", choices=("m", "cm", "mm"), default="m", help="length unit of the input and output")
+    p.add_argument(
+        "--units",
+        choices=("m", "cm", "mm"),
+        default="m",
+        help="length unit of the input and output (a glTF/GLB output is in metres, as glTF requires)",
+    )
     p.add_argument("--y-up", action="store_true", help="write a Z-up result Y-up (Blender/glTF); implied by --up y")
     p.add_argument("--prior-only", action="store_true", help="use the skinning prior, not the model")
     p.set_defaults(func=cmd_drape)

@@ -868,3 +868,19 @@ def test_a_reader_that_goes_away_ends_the_command_quietly(monkeypatch, capsys):
     monkeypatch.setattr(cli, "cmd_data_info", closed)
     assert main(["data", "info", "anything"]) == 1
     assert capsys.readouterr().err == ""
+
+
+def test_drape_writes_glb_in_metres_and_obj_in_the_input_units(scene, tmp_path):
+    """The scene in centimetres (--units cm): the OBJ output is in centimetres like the input, the GLB in metres."""
+    from garsim import GarSim
+    from garsim.geometry.io import load_mesh
+
+    folder, meshes = scene
+    for name in "ctg":
+        _write_obj(tmp_path / f"{name}.obj", np.asarray(meshes[name].vertices) * 100.0, meshes[name].faces)
+    argv = ["drape", "--prior-only", "--units", "cm", "--garment", str(tmp_path / "g.obj")]
+    argv += ["--canonical", str(tmp_path / "c.obj"), "--target", str(tmp_path / "t.obj")]
+    metres = GarSim.prior_only().drape(meshes["c"], meshes["t"], meshes["g"])
+    for ext, scale in ((".obj", 100.0), (".glb", 1.0)):
+        assert main([*argv, "--out", str(tmp_path / f"out{ext}")]) == 0
+        np.testing.assert_allclose(load_mesh(tmp_path / f"out{ext}")[0], metres * scale, atol=1e-4 * scale)
