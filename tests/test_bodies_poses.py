@@ -351,3 +351,23 @@ def test_read_pose_sequence_formats_agree(tmp_path):
     (tmp_path / "latin1.json").write_bytes(b'[{"neck01": [0, 0, 0]}] \xe9')
     with pytest.raises(ValueError, match="latin1.json: not a readable pose file"):
         read_pose_sequence(tmp_path / "latin1.json")
+
+
+def test_pose_values_out_of_any_range_are_refused_and_beyond_the_limits_warned(tmp_path, caplog):
+    """Joint angles past 180 degrees and axis-angles past 2 pi (degrees given as radians) are refused; a joint angle
+    inside 180 but beyond ``JointLimits`` (the training poses' range) is read with a warning."""
+    import json
+    import logging
+
+    from garsim.bodies.poses import read_pose_sequence
+
+    (tmp_path / "wild.json").write_text(json.dumps([{"hip_flexion_L": 30}, {"hip_flexion_L": 400}]))
+    with pytest.raises(ValueError, match="frame 1: joint angles are degrees in \\[-180, 180\\]"):
+        read_pose_sequence(tmp_path / "wild.json")
+    (tmp_path / "deg.json").write_text(json.dumps([{"neck01": [0.0, 45.0, 0.0]}]))
+    with pytest.raises(ValueError, match="turns by 45 rad"):
+        read_pose_sequence(tmp_path / "deg.json")
+    (tmp_path / "far.json").write_text(json.dumps([{"hip_flexion_L": 120.0}]))
+    with caplog.at_level(logging.WARNING, logger="garsim.bodies.poses"):
+        assert len(read_pose_sequence(tmp_path / "far.json")) == 1
+    assert "hip_flexion_L=120 beyond the joint limits" in caplog.text

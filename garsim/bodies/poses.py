@@ -25,6 +25,7 @@ The right side mirrors the left (axis-angle ``(x, y, z) -> (x, -y, -z)``).
 
 from __future__ import annotations
 
+import logging
 import math
 import re
 from collections.abc import Mapping, Sequence
@@ -37,6 +38,8 @@ import torch
 from scipy.spatial import cKDTree
 
 from garsim.bodies.anny import T_POSE_ARM_DEGREES, AnnyBody
+
+log = logging.getLogger(__name__)
 
 SPINE_BONES: tuple[str, ...] = ("spine05", "spine04", "spine03", "spine02", "spine01")
 """Spine bones from the pelvis up; spine angles are split evenly over them."""
@@ -589,6 +592,10 @@ def _as_rotvec(name: str, value: object, where: str) -> np.ndarray:
             f"{where}: bone {name!r} must be an axis-angle [x, y, z] (radians) or a 3x3 / 4x4 rotation matrix, "
             f"got shape {r.shape}"
         )
+    if np.linalg.norm(r) > 2.0 * math.pi:
+        raise PoseFileError(
+            f"{where}: bone {name!r} turns by {np.linalg.norm(r):.3g} rad: axis-angles are radians (at most 2 pi)"
+        )
     return r
 
 
@@ -609,6 +616,17 @@ def _frame_pose(frame: Mapping[str, object], where: str) -> dict[str, np.ndarray
             values = {"": math.nan}
         if not all(math.isfinite(v) for v in values.values()):
             raise PoseFileError(f"{where}: every joint angle must be one finite number of degrees")
+        wild = {k: v for k, v in values.items() if abs(v) > 180.0}
+        if wild:
+            raise PoseFileError(f"{where}: joint angles are degrees in [-180, 180], got {wild}")
+        limits = {k: limit_of(JointLimits(), k) for k in values}
+        beyond = {k: v for k, v in values.items() if not limits[k][0] <= v <= limits[k][1]}
+        if beyond:
+            log.warning(
+                "%s: %s beyond the joint limits the training poses were sampled in (garsim.bodies.poses.JointLimits)",
+                where,
+                ", ".join(f"{k}={v:g}" for k, v in sorted(beyond.items())),
+            )
         return unbatch(angles_to_pose(values), 0)
     return {str(k): _as_rotvec(str(k), v, where) for k, v in frame.items()}
 
