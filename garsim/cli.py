@@ -608,6 +608,11 @@ def cmd_train(args: argparse.Namespace) -> int:
         train = MirrorAugmented(train)
     print(f"training on {len(train)} samples, validating on {len(val)} ({args.resolution} resolution)")
     model_config = init.config if init is not None else GarSimConfig(**({"head": args.head} if args.head else {}))
+    if cfg.mirror and getattr(model_config, "semantic", "grid") == "vertex":
+        raise ValueError(
+            "--mirror needs the grid body-semantic input: a vertex-mode mask is indexed by body vertex and does not "
+            "follow the reflection"
+        )
     added = {k: True for k in WIDENING_FLAGS if getattr(args, k) and not getattr(model_config, k)}
     if added and cfg.model != "garsim":
         flag = "--" + next(iter(added)).replace("_", "-")
@@ -928,7 +933,7 @@ def build_parser() -> argparse.ArgumentParser:
         "--collision-start",
         type=int,
         default=None,
-        help="epoch that switches the collision loss on (default: when validation plateaus)",
+        help="epochs completed before the collision loss is on (0: from the start; default: when validation plateaus)",
     )
     losses = ("garsim.train.losses", "LossWeights")
     _config_default(

@@ -188,7 +188,15 @@ def test_direction_and_magnitude_terms_by_hand():
     # the body frame: a 90° turn about z maps the world x displacement of v3 to body-frame y
     g.rot = torch.tensor([[[0.0, -1, 0], [1, 0, 0], [0, 0, 1]]])
     assert direction_loss(ortho, m, g, batch, 1).item() == pytest.approx(0.0, abs=1e-7)
+    # a local rotation (GarSimConfig.local_rotation) turns the decoded vector: a 90° turn about z at v3 wants the
+    # decoder's direction along -y for its world +x displacement
     g.rot = torch.eye(3)[None]
+    g.local_rot = torch.eye(3).repeat(4, 1, 1)
+    g.local_rot[3] = torch.tensor([[0.0, -1, 0], [1, 0, 0], [0, 0, 1]])
+    turned = along.clone()
+    turned[3] = torch.tensor([0.0, -1, 0])
+    assert direction_loss(turned, m, g, batch, 1).item() == pytest.approx(0.0, abs=1e-7)
+    del g.local_rot
     _, terms = garsim_loss(g.target, g, LossWeights(dir=0.5), direction=opposite, magnitude=m)
     expected = 0.5 * 0.8 / 0.7 + 0.01 * terms["sm"].item() + 1e-4 * terms["nc"].item()
     assert terms["total"].item() == pytest.approx(expected)

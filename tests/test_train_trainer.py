@@ -41,10 +41,29 @@ def test_training_reduces_loss_and_logs(tmp_path, data):
     hist = Trainer(SMALL, _cfg(tmp_path, epochs=4), tr, va).fit()
     assert hist[-1]["train_l2_mm"] < 0.9 * hist[0]["train_l2_mm"]
     assert all(np.isfinite(h["val_err_mm"]) for h in hist)
-    assert [h["collision"] for h in hist] == [0, 1, 1, 1]
+    assert [h["collision"] for h in hist] == [0, 0, 1, 1]  # the term in each epoch: on after 2 epochs completed
     rows = list(csv.DictReader(open(tmp_path / "run" / "log.csv")))
     assert len(rows) == 4 and float(rows[-1]["val_prior_mm"]) == pytest.approx(hist[0]["val_prior_mm"])
     assert (tmp_path / "run" / "best" / "model.safetensors").exists()
+
+
+def test_the_collision_term_waits_for_a_plateau_not_for_slow_progress(tmp_path, data):
+    """Without a start epoch: a score 0.5% better every epoch is not a plateau (1.5% better over 3 epochs beats the
+    1% bound); a flat score is one after 3 epochs."""
+    tr, va = data
+
+    def run(scores):
+        cfg = _cfg(tmp_path / str(len(scores)), epochs=len(scores), collision_start_epoch=None)
+        trainer = Trainer(SMALL, cfg, tr, va)
+        values = iter(scores)
+        trainer.train_epoch = lambda: {"train_loss": 1.0, "train_l2_mm": 1.0}
+        trainer.validate = lambda: (
+            {k: 0.0 for k in ("val_err_mm", "val_prior_mm", "val_collision_pct")} | {"val_score": next(values)}
+        )
+        return [h["collision"] for h in trainer.fit()]
+
+    assert run([100.0 * 0.995**k for k in range(7)]) == [0] * 7
+    assert run([100.0, 99.9, 99.9, 99.8, 99.8, 99.8]) == [0, 0, 0, 0, 1, 1]
 
 
 def test_seeded_run_resumes_exactly(tmp_path, data):

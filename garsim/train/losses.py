@@ -207,9 +207,15 @@ def direction_loss(
     direction: torch.Tensor, magnitude: torch.Tensor, data: Data, batch: torch.Tensor, num_graphs: int
 ) -> torch.Tensor:
     """Per graph: Σ |r| (1 − d̂·r̂) / Σ |r| + mean |m − |r|| for the body-frame unit directions d̂ and the
-    magnitudes m (metres) against the simulated displacement r = target − prior (in each graph's body frame), (B,)."""
+    magnitudes m (metres) against the simulated displacement r = target − prior in the frame the decoder predicts
+    in: each graph's body frame, and with ``local_rot`` (``GarSimConfig.local_rotation``, which turns the decoded
+    vector by it) that rotation undone first, (B,)."""
     rot = data.rot[0].expand(batch.shape[0], 3, 3) if data.rot.shape[0] == 1 else data.rot[batch]
-    r = torch.einsum("nij,nj->ni", rot.to(direction.dtype), data.target - data.prior)
+    d = data.target - data.prior
+    local = getattr(data, "local_rot", None)
+    if local is not None:  # pred = prior + L R^T v, so v = R L^T (target - prior)
+        d = torch.einsum("nji,nj->ni", local.to(d.dtype), d)
+    r = torch.einsum("nij,nj->ni", rot.to(direction.dtype), d)
     length = torch.linalg.vector_norm(r, dim=-1)
     cos = (direction * r).sum(-1) / length.clamp_min(1e-9)
     num = scatter(length * (1.0 - cos), batch, dim=0, dim_size=num_graphs, reduce="sum")

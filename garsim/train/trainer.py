@@ -3,8 +3,9 @@ safetensors checkpoints with resume, tqdm progress, CSV log, seeded determinism,
 (``torchrun --nproc_per_node=2 ...`` on CPU with gloo).
 
 The collision term of Eq. 7 is switched on after the other losses converge (paper Sec. 5):
-at ``collision_start_epoch`` if set, or once the validation error has not improved by
-``collision_min_delta`` (relative) for ``collision_patience`` epochs.
+at ``collision_start_epoch`` (epochs completed) if set, or once the validation score (the checkpoint's: error plus
+``COLLISION_MM_PER_PCT`` x collision %) has not improved by ``collision_min_delta`` (relative, against its value at
+the last such improvement) for ``collision_patience`` epochs.
 """
 
 from __future__ import annotations
@@ -284,7 +285,8 @@ class Trainer:
         self.step = 0
         self.collision_on = train_config.collision_start_epoch == 0
         self.best_val = math.inf
-        self.best_epoch = -1
+        self.best_epoch = -1  # the epoch of the last significant improvement (plateau detection)
+        self.plateau_ref = math.inf  # the score then: an improvement counts when it beats this by min_delta
         self.history: list[dict[str, Any]] = []
         if self.rank == 0:
             self.out.mkdir(parents=True, exist_ok=True)
@@ -435,13 +437,14 @@ class Trainer:
             self.build_graphs()
         while self.epoch < last:
             t0 = time.perf_counter()
+            used = self.collision_on  # the collision term of this epoch (the log's column)
             train = self.train_epoch()
             val = self.validate()
             self.epoch += 1
             metric = val["val_score"] if math.isfinite(val["val_score"]) else train["train_l2_mm"]
+            if self.best_epoch < 0 or metric < self.plateau_ref * (1.0 - self.cfg.collision_min_delta):
+                self.best_epoch, self.plateau_ref = self.epoch, metric
             if metric < self.best_val:
-                if self.best_epoch < 0 or metric < self.best_val * (1.0 - self.cfg.collision_min_delta):
-                    self.best_epoch = self.epoch  # last significant improvement (plateau detection)
                 self.best_val = metric
                 if self.rank == 0:
                     self.model.save(self.out / "best")
@@ -452,7 +455,7 @@ class Trainer:
                 "lr": self.lr_at(self.step),
                 **train,
                 **val,
-                "collision": int(self.collision_on),
+                "collision": int(used),
                 "seconds": time.perf_counter() - t0,
             }
             self.history.append(row)
@@ -495,6 +498,7 @@ class Trainer:
             "collision_on": self.collision_on,
             "best_val": self.best_val if math.isfinite(self.best_val) else None,
             "best_epoch": self.best_epoch,
+            "plateau_ref": self.plateau_ref if math.isfinite(self.plateau_ref) else None,
             "param_groups": opt["param_groups"],
             "optimizer_scalars": scalars,
             "history": self.history,
@@ -530,4 +534,6 @@ class Trainer:
         self.collision_on = bool(state["collision_on"])
         self.best_val = math.inf if state["best_val"] is None else float(state["best_val"])
         self.best_epoch = int(state["best_epoch"])
+        ref = state.get("plateau_ref", state["best_val"])  # checkpoints before 2026-12-07: the best score
+        self.plateau_ref = math.inf if ref is None else float(ref)
         self.history = list(state.get("history", []))
