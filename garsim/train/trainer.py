@@ -342,7 +342,9 @@ class Trainer:
         self.train_set.build(np.sort(self.shard), desc="building graphs" if show else None)
 
     def train_epoch(self) -> dict[str, float]:
-        """One pass over the training set; returns mean loss and mean L2 (mm)."""
+        """One pass over the training set; returns the mean loss and the mean of Eq. 3's L2 term in mm
+        (``train_l2_mm``: 0.6 x the free and 0.4 x the pinned vertices' mean distance, so not comparable with the
+        validation's plain mean error ``val_err_mm``)."""
         self.net.train()
         loader = self._loader(self.epoch)
         limit = self.steps_per_epoch()
