@@ -159,8 +159,9 @@ class MeshPairPrior:
 
 def mesh_pair_prior(garment: np.ndarray, canonical: np.ndarray, target: np.ndarray, faces: np.ndarray) -> np.ndarray:
     """The garment prior from two body meshes: Anny-topology bodies get the LBS prior with bone transforms
-    recovered from the meshes (the data generator's stored prior skins with the known pose instead: on the fixture
-    the two differ by 0.1-1 mm on average and up to ~12 mm at a vertex); any other topology the rig-free prior.
+    recovered from the meshes (the data generator's stored prior skins with the known pose instead: on 126 v5 test
+    samples they differ by 0.33 mm on average and up to 3 cm at single vertices, and the raw network's error is the
+    same with either, 23.59 vs 23.60 mm); any other topology the rig-free prior.
 
     Computed about the canonical body's centroid (float64), so moving the whole scene moves the prior with it
     exactly (the bone fit's damping pulls towards identity transforms, which is not translation invariant).
