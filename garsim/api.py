@@ -106,8 +106,9 @@ FAR_FROM_BODY = 0.25
 """m: a garment whose median vertex is farther than this from the canonical body does not surround it (lenient:
 the hem of a full maxi skirt hangs well beyond 10 cm)."""
 INSIDE_LIMIT = 0.05
-"""Share of a garment's vertices inside the canonical body (winding number) above which it is not draped on that
-body (garments draped on it have none; one moved 10 cm sideways, shrunk to 70% or on another pose has 8-100%)."""
+"""Share of a garment's vertices inside the canonical body (DeePSD's test: behind the nearest body vertex's normal)
+above which it is not draped on that body (garments draped on it have none; one moved 10 cm sideways, shrunk to 70%
+or made on another pose has 7-100%: docs/studies/input_checks.md)."""
 BETTER_FIT = 0.7
 """A garment turned between Y-up and Z-up, or scaled by a power of ten, that lies this much nearer the canonical
 body (median distance), within 10 cm of it, with at most 1% inside it and a garment's size (its bounding box's
@@ -120,18 +121,14 @@ _READINGS: tuple[tuple[str, Any], ...] = (
 )
 
 
-def _median_distance(body: np.ndarray, garment: np.ndarray) -> float:
-    """Median distance (m) of the garment's vertices to the body's."""
+def _fit(body: np.ndarray, normals: np.ndarray, garment: np.ndarray) -> tuple[float, float]:
+    """(median distance (m) of the garment's vertices to the body's, share of them inside the body by DeePSD's test:
+    behind their nearest body vertex's normal), from one KD-tree query."""
     from garsim.geometry.proximity import cached_tree
 
-    return float(np.median(cached_tree(body).query(garment)[0]))
-
-
-def _inside_share(body: np.ndarray, body_faces: np.ndarray, garment: np.ndarray) -> float:
-    """Share of the garment's vertices inside the body (winding number)."""
-    from garsim.geometry.inside import inside_mask
-
-    return float(inside_mask(garment, body, body_faces).mean())
+    dist, idx = cached_tree(body).query(garment)
+    inside = np.einsum("ij,ij->i", garment - body[idx], normals[idx]) < 0.0
+    return float(np.median(dist)), float(inside.mean())
 
 
 def check_scene(body: np.ndarray, body_faces: np.ndarray, garment: np.ndarray, up: str = "z", units: str = "m") -> None:
@@ -159,14 +156,17 @@ def check_scene(body: np.ndarray, body_faces: np.ndarray, garment: np.ndarray, u
         hint = fits[0] if fits else None
         fix = f"pass units='{hint}' (CLI: --units {hint})" if hint else "give the meshes in metres, cm or mm"
         raise MeshError(f"the canonical body is {raw:.3g} {units} tall (units='{units}'), not a person: {fix}")
-    median = _median_distance(body, garment)
+    # coarse figures (a median, a share over 5%, ratios of 0.7): a few hundred evenly spread vertices tell them
+    garment = garment[:: max(1, len(garment) // 400)]
+    normals = cached_vertex_normals(body, body_faces)
+    median, inside = _fit(body, normals, garment)
     for reading, move in _READINGS:
         other = move(garment)
         size = float(np.linalg.norm(other.max(axis=0) - other.min(axis=0))) / height
         if not 0.1 <= size <= 1.5:
             continue
-        other_median = _median_distance(body, other)
-        if other_median < min(BETTER_FIT * median, 0.1) and _inside_share(body, body_faces, other) <= 0.01:
+        other_median, other_inside = _fit(body, normals, other)
+        if other_median < min(BETTER_FIT * median, 0.1) and other_inside <= 0.01:
             raise MeshError(
                 f"the garment is in another axis or unit than the canonical body: {reading} it would lie "
                 f"{100 * other_median:.1f} cm from the body instead of {100 * median:.1f} cm; give every mesh in one "
@@ -178,7 +178,6 @@ def check_scene(body: np.ndarray, body_faces: np.ndarray, garment: np.ndarray, u
             "the canonical body (same position, axis and units; a Y-up or cm/mm file: pass up= / units=, CLI: "
             "--up / --units)"
         )
-    inside = _inside_share(body, body_faces, garment)
     if inside > INSIDE_LIMIT:
         raise MeshError(
             f"{100 * inside:.0f}% of the garment's vertices are inside the canonical body: it must be draped on the "
