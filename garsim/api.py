@@ -105,10 +105,12 @@ BODY_HEIGHT_RANGE = (0.4, 2.6)
 FAR_FROM_BODY = 0.25
 """m: a garment whose median vertex is farther than this from the canonical body does not surround it (lenient:
 the hem of a full maxi skirt hangs well beyond 10 cm)."""
-INSIDE_LIMIT = 0.05
-"""Share of a garment's vertices inside the canonical body (DeePSD's test: behind the nearest body vertex's normal)
-above which it is not draped on that body (garments draped on it have none; one moved 10 cm sideways, shrunk to 70%
-or made on another pose has 7-100%: docs/studies/input_checks.md)."""
+INSIDE_LIMIT = 0.10
+"""Share of a garment's vertices inside the canonical body (winding number) above which it is not draped on that body
+and is refused; over ``INSIDE_WARN`` a warning says so. Garments draped on their body have none (217 here: 0.6% at
+most even by DeePSD's looser nearest-normal test); one moved 10 cm sideways, shrunk to 70% or made on another pose
+has 5-100% (docs/studies/input_checks.md)."""
+INSIDE_WARN = 0.02
 BETTER_FIT = 0.7
 """A garment turned between Y-up and Z-up, or scaled by a power of ten, that lies this much nearer the canonical
 body (median distance), within 10 cm of it, with at most 1% inside it and a garment's size (its bounding box's
@@ -178,11 +180,18 @@ def check_scene(body: np.ndarray, body_faces: np.ndarray, garment: np.ndarray, u
             "the canonical body (same position, axis and units; a Y-up or cm/mm file: pass up= / units=, CLI: "
             "--up / --units)"
         )
-    if inside > INSIDE_LIMIT:
-        raise MeshError(
-            f"{100 * inside:.0f}% of the garment's vertices are inside the canonical body: it must be draped on the "
-            "canonical body (the pose and body it was made on, e.g. not the target)"
-        )
+    if inside > INSIDE_WARN:  # by DeePSD's test, which flags some points near concave parts: the exact one decides
+        from garsim.geometry.inside import inside_mask
+
+        inside = float(inside_mask(garment, body, body_faces).mean())
+        where = f"{100 * inside:.0f}% of the garment's vertices are inside the canonical body"
+        if inside > INSIDE_LIMIT:
+            raise MeshError(
+                f"{where}: it must be draped on the canonical body (the pose and body it was made on, e.g. not the "
+                "target)"
+            )
+        if inside > INSIDE_WARN:
+            log.warning("%s: is it draped on the canonical body? The drape starts from there", where)
 
 
 TARGET_SCALE_RANGE = (0.5, 2.0)
