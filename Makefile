@@ -5,7 +5,7 @@ VENV := .venv
 TORCH_PIP_ARGS ?=
 STAMP := $(VENV)/.installed
 
-.PHONY: setup demo lint test test-all data results
+.PHONY: setup demo lint test test-all data train results
 
 $(STAMP): pyproject.toml
 	test -d $(VENV) || $(PYTHON) -m venv $(VENV)
@@ -39,6 +39,15 @@ data: $(STAMP)
 	$(GENERATE) --out $(DATA_ROOT)/v5 --train 1800 --test 0 --ood 0 & \
 	$(GENERATE) --out $(DATA_ROOT)/v5test --train 0 --test 260 --ood 64 & \
 	wait
+
+# The v1.0 training recipe from scratch on the v5 training folder (issue 9; docs/studies/scratch_v5.md: 48 minutes on
+# 1,196 samples on the 2 cores, about 2 hours on the complete folder), in resumable stages (rerun to continue); it
+# prints the model folder to ship (stage 1, then the fine-tune averaged with it):
+#   nohup make train > ~/garsim-runs/train.log 2>&1 &     then: make results RUN=~/garsim-runs/v1/stage1 MODEL=<printed>
+TRAIN_DATA ?= $(DATA_ROOT)/v5
+train: $(STAMP)
+	DATA=$(TRAIN_DATA) OUT=$(RUN) PROCS=2 BATCH=4 LR=5e-4 STAGE1_EPOCHS=12 FINETUNE_EPOCHS=4 FABRIC_EPOCHS=0 \
+	  STAGE2_EPOCHS=0 REMESH=2 MIRROR=1 PAIR=1 SOUP=1 bash examples/train_v1.sh
 
 # The results report (docs/results.md and its figures) from the dataset, the model and its training run (when
 # RUN exists; otherwise docs/training_curve.png is kept):
