@@ -158,7 +158,7 @@ def check_scene(body: np.ndarray, body_faces: np.ndarray, garment: np.ndarray, u
         hint = fits[0] if fits else None
         fix = f"pass units='{hint}' (CLI: --units {hint})" if hint else "give the meshes in metres, cm or mm"
         raise MeshError(f"the canonical body is {raw:.3g} {units} tall (units='{units}'), not a person: {fix}")
-    # coarse figures (a median, a share over 5%, ratios of 0.7): a few hundred evenly spread vertices tell them
+    # coarse figures (a median, shares of 1-10%, ratios of 0.7): a few hundred evenly spread vertices tell them
     garment = garment[:: max(1, len(garment) // 400)]
     normals = cached_vertex_normals(body, body_faces)
     median, inside = _fit(body, normals, garment)
