@@ -123,12 +123,10 @@ _READINGS: tuple[tuple[str, Any], ...] = (
 )
 
 
-def _fit(body: np.ndarray, normals: np.ndarray, garment: np.ndarray) -> tuple[float, float]:
+def _fit(tree: Any, body: np.ndarray, normals: np.ndarray, garment: np.ndarray) -> tuple[float, float]:
     """(median distance (m) of the garment's vertices to the body's, share of them inside the body by DeePSD's test:
-    behind their nearest body vertex's normal), from one KD-tree query."""
-    from garsim.geometry.proximity import cached_tree
-
-    dist, idx = cached_tree(body).query(garment)
+    behind their nearest body vertex's normal), from one query of the body's KD-tree."""
+    dist, idx = tree.query(garment)
     inside = np.einsum("ij,ij->i", garment - body[idx], normals[idx]) < 0.0
     return float(np.median(dist)), float(inside.mean())
 
@@ -160,14 +158,16 @@ def check_scene(body: np.ndarray, body_faces: np.ndarray, garment: np.ndarray, u
         raise MeshError(f"the canonical body is {raw:.3g} {units} tall (units='{units}'), not a person: {fix}")
     # coarse figures (a median, shares of 1-10%, ratios of 0.7): a few hundred evenly spread vertices tell them
     garment = garment[:: max(1, len(garment) // 400)]
-    normals = cached_vertex_normals(body, body_faces)
-    median, inside = _fit(body, normals, garment)
+    from garsim.geometry.proximity import cached_tree
+
+    tree, normals = cached_tree(body), cached_vertex_normals(body, body_faces)
+    median, inside = _fit(tree, body, normals, garment)
     for reading, move in _READINGS:
         other = move(garment)
         size = float(np.linalg.norm(other.max(axis=0) - other.min(axis=0))) / height
         if not 0.1 <= size <= 1.5:
             continue
-        other_median, other_inside = _fit(body, normals, other)
+        other_median, other_inside = _fit(tree, body, normals, other)
         if other_median < min(BETTER_FIT * median, 0.1) and other_inside <= 0.01:
             raise MeshError(
                 f"the garment is in another axis or unit than the canonical body: {reading} it would lie "
@@ -296,9 +296,12 @@ class Scene:
         units: str,
     ) -> Scene:
         """A new Scene of meshes already in garsim's frame, once their relation and the pins are checked."""
+        auto = isinstance(pinned, str)
+        if auto and pinned.strip().lower() != "auto":
+            raise ValueError(f"pinned must be 'auto', vertex indices or a boolean mask, got {pinned!r}")
         check_scene(bc, bf, g, up=up, units=units)
+        mask = None if auto else _pinned_mask(pinned, len(g))  # on the user's vertices
         index = weld_index(g, gf)
-        mask = None if isinstance(pinned, str) else _pinned_mask(pinned, len(g))  # the user's vertices
         if index is not None:
             g, gf = weld(g, gf, index)
             if mask is not None:  # a welded vertex is pinned when any of its copies is
@@ -310,9 +313,7 @@ class Scene:
                 "the others): drape separate garments one at a time",
                 pieces,
             )
-        if isinstance(pinned, str):
-            if pinned.strip().lower() != "auto":
-                raise ValueError(f"pinned must be 'auto', vertex indices or a boolean mask, got {pinned!r}")
+        if auto:  # found on the welded garment: a seam is not a border
             mask = auto_pinned(g, gf)
         arrays = (bc, np.array(bf), g, np.array(gf), np.array(mask))  # the scene's own copies
         for a in (*arrays, index):

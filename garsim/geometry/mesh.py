@@ -190,11 +190,8 @@ def piece_count(faces: np.ndarray, num_vertices: int) -> int:
     f = np.asarray(faces, dtype=np.int64)
     if len(f) == 0:
         return 0
-    used = np.unique(f)
-    e = unique_edges(f)
-    adj = sp.coo_matrix((np.ones(len(e)), (e[:, 0], e[:, 1])), shape=(num_vertices, num_vertices))
-    labels = connected_components(adj, directed=False)[1]
-    return len(np.unique(labels[used]))
+    labels = connected_components(edge_adjacency(unique_edges(f), num_vertices), directed=False)[1]
+    return len(np.unique(labels[np.unique(f)]))
 
 
 TOP_LOOP_BAND = 0.04
@@ -228,16 +225,14 @@ def weld_index(vertices: np.ndarray, faces: np.ndarray, tolerance: float = WELD_
     from scipy.sparse.csgraph import connected_components
     from scipy.spatial import cKDTree
 
-    v = np.asarray(vertices, dtype=np.float64)
-    n = len(v)
-    pairs = cKDTree(v).query_pairs(tolerance, output_type="ndarray")
+    n = len(vertices)
+    pairs = cKDTree(np.asarray(vertices, dtype=np.float64)).query_pairs(tolerance, output_type="ndarray")  # i < j
     if len(pairs):
-        edges = unique_edges(faces)
-        pairs = pairs[~np.isin(pairs.min(1) * n + pairs.max(1), edges.min(1) * n + edges.max(1))]
+        edges = unique_edges(faces)  # i < j too
+        pairs = pairs[~np.isin(pairs[:, 0] * n + pairs[:, 1], edges[:, 0] * n + edges[:, 1])]
     if len(pairs) == 0:
         return None
-    graph = sp.coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(n, n))
-    return connected_components(graph, directed=False)[1].astype(np.int64)
+    return connected_components(edge_adjacency(pairs, n), directed=False)[1].astype(np.int64)
 
 
 def weld(vertices: np.ndarray, faces: np.ndarray, index: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

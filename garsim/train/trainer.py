@@ -285,7 +285,7 @@ class Trainer:
         self.step = 0
         self.collision_on = train_config.collision_start_epoch == 0
         self.best_val = math.inf
-        self.best_epoch = -1  # the epoch of the last significant improvement (plateau detection)
+        self.plateau_epoch = -1  # the epoch of the last significant improvement (plateau detection)
         self.plateau_ref = math.inf  # the score then: an improvement counts when it beats this by min_delta
         self.history: list[dict[str, Any]] = []
         if self.rank == 0:
@@ -426,7 +426,7 @@ class Trainer:
         start = self.cfg.collision_start_epoch
         if start is not None:
             self.collision_on = self.epoch >= start
-        elif self.best_epoch >= 0 and self.epoch - self.best_epoch >= self.cfg.collision_patience:
+        elif self.plateau_epoch >= 0 and self.epoch - self.plateau_epoch >= self.cfg.collision_patience:
             self.collision_on = True
 
     def fit(self, stop_after_epoch: int | None = None) -> list[dict[str, Any]]:
@@ -444,8 +444,8 @@ class Trainer:
             val = self.validate()
             self.epoch += 1
             metric = val["val_score"] if math.isfinite(val["val_score"]) else train["train_l2_mm"]
-            if self.best_epoch < 0 or metric < self.plateau_ref * (1.0 - self.cfg.collision_min_delta):
-                self.best_epoch, self.plateau_ref = self.epoch, metric
+            if self.plateau_epoch < 0 or metric < self.plateau_ref * (1.0 - self.cfg.collision_min_delta):
+                self.plateau_epoch, self.plateau_ref = self.epoch, metric
             if metric < self.best_val:
                 self.best_val = metric
                 if self.rank == 0:
@@ -499,7 +499,7 @@ class Trainer:
             "step": self.step,
             "collision_on": self.collision_on,
             "best_val": self.best_val if math.isfinite(self.best_val) else None,
-            "best_epoch": self.best_epoch,
+            "plateau_epoch": self.plateau_epoch,
             "plateau_ref": self.plateau_ref if math.isfinite(self.plateau_ref) else None,
             "param_groups": opt["param_groups"],
             "optimizer_scalars": scalars,
@@ -535,7 +535,8 @@ class Trainer:
         self.step = int(state["step"])
         self.collision_on = bool(state["collision_on"])
         self.best_val = math.inf if state["best_val"] is None else float(state["best_val"])
-        self.best_epoch = int(state["best_epoch"])
-        ref = state.get("plateau_ref", state["best_val"])  # checkpoints before 2026-12-07: the best score
+        # checkpoints before 2026-12-07 kept the plateau's epoch as best_epoch and no reference score: the best one
+        self.plateau_epoch = int(state.get("plateau_epoch", state.get("best_epoch", -1)))
+        ref = state.get("plateau_ref", state["best_val"])
         self.plateau_ref = math.inf if ref is None else float(ref)
         self.history = list(state.get("history", []))
