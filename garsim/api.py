@@ -102,25 +102,39 @@ def _warn_outside_presets(fabric: Fabric) -> None:
 
 BODY_HEIGHT_RANGE = (0.4, 2.6)
 """Plausible standing body heights in metres: outside it the input is in other units (or not a body)."""
-FAR_FROM_BODY = 0.25
+FAR_FROM_BODY = 0.4
 """m: a garment whose median vertex is farther than this from the canonical body does not surround it (lenient:
-the hem of a full maxi skirt hangs well beyond 10 cm)."""
+skirts flared to a 0.6-0.7 m hem lie 26-28 cm from the body at the median)."""
 INSIDE_LIMIT = 0.10
 """Share of a garment's vertices inside the canonical body (winding number) above which it is not draped on that body
 and is refused; over ``INSIDE_WARN`` a warning says so. Garments draped on their body have none (217 here: 0.6% at
 most even by DeePSD's looser nearest-normal test); one moved 10 cm sideways, shrunk to 70% or made on another pose
 has 5-100% (docs/studies/input_checks.md)."""
 INSIDE_WARN = 0.02
+INSIDE_DEPTH = 0.005
+"""m: a garment vertex counts as inside the canonical body for ``INSIDE_LIMIT`` only this deep in it: a tight garment
+that grazes the skin by a millimetre is draped on that body (the network and the refinement handle it), one made on
+another pose or body is centimetres inside."""
+CHECK_POINTS = 2000
+"""The input checks read about this many of a garment's vertices, taken in the order of their coordinates (so a
+reordered mesh gets the same verdict)."""
 BETTER_FIT = 0.7
 """A garment turned between Y-up and Z-up, or scaled by a power of ten, that lies this much nearer the canonical
 body (median distance), within 10 cm of it, with at most 1% inside it and a garment's size (its bounding box's
-diagonal 0.1-1.5x the body's height) is in another axis or unit than the body: refused. On the fixture's and the
-external set's garments the best such reading is 1.15-4.9x farther than the garment as given."""
+diagonal 0.1-1.5x the body's height) is in another axis or unit than the body: refused. A scaled reading is tried
+only for a garment whose own size is not a garment's (scaled about the origin, a large garment may land nearer a body
+that is not centred there). On the fixture's and the external set's garments the best such reading is 1.15-4.9x
+farther than the garment as given."""
 _READINGS: tuple[tuple[str, Any], ...] = (
     ("turned from Y-up to Z-up", y_up_to_z_up),
     ("turned from Z-up to Y-up", z_up_to_y_up),
     *((f"scaled by {10.0**k:g}", lambda v, k=k: v * 10.0**k) for k in (-3, -2, -1, 1, 2, 3)),
 )
+
+
+def _size(points: np.ndarray) -> float:
+    """The diagonal of the points' bounding box."""
+    return float(np.linalg.norm(points.max(axis=0) - points.min(axis=0)))
 
 
 def _fit(tree: Any, body: np.ndarray, normals: np.ndarray, garment: np.ndarray) -> tuple[float, float]:
@@ -138,7 +152,9 @@ def check_scene(body: np.ndarray, body_faces: np.ndarray, garment: np.ndarray, u
     ``body`` and ``garment`` are in garsim's frame (metres, Z up), converted from the input's ``up`` and
     ``units``; the message names the flag that fixes the input."""
     extent = body.max(axis=0) - body.min(axis=0)
-    if extent[2] < 0.6 * extent.max():  # a T-pose's arm span may match its height; lying down it is far taller
+    # read in the wrong axis the vertical is the body's depth, its shortest extent; a T-pose's arm span may match
+    # its height, an upper-body avatar's exceed it
+    if extent[2] < 0.6 * extent.max() and extent[2] < min(extent[0], extent[1]):
         axis = "XYZ"[int(np.argmax(extent))]
         if up == "y":
             raise MeshError(
@@ -156,16 +172,16 @@ def check_scene(body: np.ndarray, body_faces: np.ndarray, garment: np.ndarray, u
         hint = fits[0] if fits else None
         fix = f"pass units='{hint}' (CLI: --units {hint})" if hint else "give the meshes in metres, cm or mm"
         raise MeshError(f"the canonical body is {raw:.3g} {units} tall (units='{units}'), not a person: {fix}")
-    # coarse figures (a median, shares of 1-10%, ratios of 0.7): a few hundred evenly spread vertices tell them
-    garment = garment[:: max(1, len(garment) // 400)]
+    # coarse figures (a median, shares of 1-10%, ratios of 0.7): a few thousand spread vertices tell them
+    garment = garment[np.lexsort(garment.T[::-1])][:: max(1, len(garment) // CHECK_POINTS)]
     from garsim.geometry.proximity import cached_tree
 
     tree, normals = cached_tree(body), cached_vertex_normals(body, body_faces)
     median, inside = _fit(tree, body, normals, garment)
+    own_size = _size(garment) / height
     for reading, move in _READINGS:
         other = move(garment)
-        size = float(np.linalg.norm(other.max(axis=0) - other.min(axis=0))) / height
-        if not 0.1 <= size <= 1.5:
+        if not 0.1 <= _size(other) / height <= 1.5 or (reading.startswith("scaled") and 0.1 <= own_size <= 1.5):
             continue
         other_median, other_inside = _fit(tree, body, normals, other)
         if other_median < min(BETTER_FIT * median, 0.1) and other_inside <= 0.01:
@@ -181,10 +197,12 @@ def check_scene(body: np.ndarray, body_faces: np.ndarray, garment: np.ndarray, u
             "--up / --units)"
         )
     if inside > INSIDE_WARN:  # by DeePSD's test, which flags some points near concave parts: the exact one decides
-        from garsim.geometry.inside import inside_mask
+        from garsim.geometry.inside import inside_mask, obstacle
 
-        inside = float(inside_mask(garment, body, body_faces).mean())
-        where = f"{100 * inside:.0f}% of the garment's vertices are inside the canonical body"
+        deep = np.abs(obstacle(body, body_faces).query(garment)[0]) > INSIDE_DEPTH
+        inside = float((inside_mask(garment, body, body_faces) & deep).mean())
+        depth = f"over {1000 * INSIDE_DEPTH:.0f} mm"
+        where = f"{100 * inside:.0f}% of the garment's vertices are {depth} inside the canonical body"
         if inside > INSIDE_LIMIT:
             raise MeshError(
                 f"{where}: it must be draped on the canonical body (the pose and body it was made on, e.g. not the "
@@ -200,7 +218,8 @@ over the sampler's whole pose range here), not one in other units (10x to 1000x)
 MAX_TILT_DEG = 45.0
 """Largest angle between the vertical and the vertical turned by the rotation that best aligns the canonical body with
 the target (Kabsch, about their centroids): up to 34 deg over the sampler's whole pose range here, 58-64 deg for a
-Y-up target read as Z-up."""
+Y-up target read as Z-up; sitting on the floor with straight legs or bending far forward turns it 47-55 deg, and is
+refused too (the bound cannot tell them from a wrong axis)."""
 
 
 def check_target(canonical: np.ndarray, target: np.ndarray) -> None:
@@ -222,7 +241,8 @@ def check_target(canonical: np.ndarray, target: np.ndarray) -> None:
     if tilt > MAX_TILT_DEG:
         raise MeshError(
             f"the target body is turned {tilt:.0f} deg away from the canonical body's vertical: give every mesh in "
-            "one axis (up= applies to all; CLI: --up)"
+            "one axis (up= applies to all; CLI: --up); a real pose turned that far (sitting on the floor, bending far "
+            "forward, lying) is beyond what garsim drapes"
         )
 
 

@@ -356,9 +356,61 @@ def test_a_garment_a_few_percent_inside_the_canonical_body_is_draped_with_a_warn
     some[pick] -= inward[pick]
     with caplog.at_level(logging.WARNING, logger="garsim.api"):
         assert GarSim.prior_only().drape(*bodies, (some, g.faces)).shape == g.vertices.shape
-    assert "of the garment's vertices are inside the canonical body: is it draped" in caplog.text
+    assert "of the garment's vertices are over 5 mm inside the canonical body: is it draped" in caplog.text
     many = g.vertices.copy()
     pick = np.flatnonzero(np.arange(len(many)) % 5 < 2)
     many[pick] -= 1.5 * inward[pick]
     with pytest.raises(MeshError, match="inside the canonical body: it must be draped"):
         GarSim.prior_only().drape(*bodies, (many, g.faces))
+
+
+def test_input_checks_accept_what_users_legitimately_bring(anny_body, scene):
+    """Found by a review (2026-12-07), each refused before: an upper-body avatar (wider than tall) in either axis,
+    a tight garment grazing the skin by 0.5 mm, a large garment in a scene whose origin is not at the body; and the
+    same garment with its vertices reordered gets one verdict. A target sitting on the floor (tilted ~50 deg) is still
+    refused, with a message that names the pose as a possible cause."""
+    from garsim.api import check_scene, check_target
+    from garsim.bodies.poses import angles_to_pose, unbatch
+    from garsim.geometry.io import y_up_to_z_up, z_up_to_y_up
+
+    c, _, g = scene
+    body, faces = c.vertices.astype(np.float64), anny_body.faces
+    keep = (body[faces][:, :, 2] > body[:, 2].min() + 0.75).all(1)  # torso, head and arms: ~0.85 m tall, 1.4 m wide
+    used = np.unique(faces[keep])
+    upper, upper_faces = body[used], np.searchsorted(used, faces[keep])
+    assert np.ptp(upper[:, 2]) < np.ptp(upper[:, 0])
+    check_scene(upper, upper_faces, upper[::50] + [0.0, 0.0, 0.0])
+    check_scene(y_up_to_z_up(z_up_to_y_up(upper)), upper_faces, upper[::50])  # the same, read from a Y-up file
+    with pytest.raises(MeshError, match="up='y'"):
+        check_scene(z_up_to_y_up(body), faces, z_up_to_y_up(g.vertices))  # a whole body still is refused
+
+    sit = anny_body.pose(unbatch(angles_to_pose({"hip_flexion_L": 85, "hip_flexion_R": 85}), 0)).vertices
+    with pytest.raises(MeshError, match="sitting on the floor"):  # refused, but the message says it may be the pose
+        check_target(body, sit)
+
+    from garsim.geometry.inside import obstacle
+
+    sd, close, normal, _ = obstacle(body, faces).query(g.vertices)
+    tight = g.vertices.copy()
+    near = np.argsort(sd)[: len(sd) // 5]  # the fifth of the skirt nearest the skin, sunk 0.5 mm into it
+    tight[near] = close[near] - 0.0005 * normal[near]
+    check_scene(body, faces, tight)
+
+    flared = g.vertices.copy()
+    axis = np.array([body[:, 0].mean(), body[:, 1].mean(), 0.0])
+    flared[:, :2] = axis[:2] + 2.5 * (flared[:, :2] - axis[:2]) * np.clip(1.0 - flared[:, 2:] / 1.0, 0.3, 1.0)
+    origin = np.array([0.0, body[:, 1].max(), 0.0])  # the origin on the plane of the body's back
+    check_scene(body, faces, flared)
+    check_scene(body - origin, faces, flared - origin)
+
+    radial = (g.vertices - axis) * [1, 1, 0]
+    sunk = g.vertices - 0.05 * radial / np.linalg.norm(radial, axis=1)[:, None]  # partly inside: near a bound
+    verdicts = set()
+    for seed in range(4):
+        order = np.random.default_rng(seed).permutation(len(sunk))
+        try:
+            check_scene(body, faces, sunk[order])
+            verdicts.add("ok")
+        except MeshError as exc:
+            verdicts.add(str(exc))
+    assert len(verdicts) == 1

@@ -184,7 +184,8 @@ def border_loops(faces: np.ndarray) -> list[np.ndarray]:
 
 
 def piece_count(faces: np.ndarray, num_vertices: int) -> int:
-    """How many separate pieces (edge-connected sets of faces) a mesh has."""
+    """How many separate pieces a mesh has: sets of faces joined through their vertices (two triangles that touch at
+    one vertex are one piece)."""
     from scipy.sparse.csgraph import connected_components
 
     f = np.asarray(faces, dtype=np.int64)
