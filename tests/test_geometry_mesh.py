@@ -186,6 +186,17 @@ def test_a_square_split_along_its_diagonal_is_welded_back():
     np.testing.assert_array_equal(faces, SQUARE_F)
 
 
+def test_a_seam_across_a_short_edge_welds_each_end_to_its_own_copy():
+    """Edge 0-1 is 50 micrometres long and a seam runs along it: the second triangle stores copies 4 (of 0) and 5 (of
+    1). Each copy is within the tolerance of both ends, but lies on the other end's copy: 4 -> 0, 5 -> 1, and the
+    short edge stays (a chained weld merged all four and dropped both faces)."""
+    v = np.array([[0, 0, 0], [5e-5, 0, 0], [0, 1, 0], [0, -1, 0], [0, 0, 0], [5e-5, 0, 0]], dtype=np.float64)
+    f = np.array([[0, 1, 2], [5, 4, 3]])
+    index = weld_index(v, f)
+    np.testing.assert_array_equal(index, [0, 1, 2, 3, 0, 1])
+    np.testing.assert_array_equal(weld(v, f, index)[1], [[0, 1, 2], [1, 0, 3]])
+
+
 def test_weld_leaves_short_edges_and_distant_vertices_and_drops_collapsed_and_repeated_faces():
     tiny = np.array([[0, 0, 0], [1e-5, 0, 0], [0, 1, 0]], dtype=np.float64)  # an edge of 10 micrometres
     assert weld_index(tiny, np.array([[0, 1, 2]])) is None
@@ -198,7 +209,7 @@ def test_weld_leaves_short_edges_and_distant_vertices_and_drops_collapsed_and_re
     np.testing.assert_array_equal(faces, SQUARE_F)
 
 
-def test_piece_count_counts_edge_connected_faces():
+def test_piece_count_counts_vertex_connected_faces():
     assert piece_count(SQUARE_F, 4) == 1
     assert piece_count(np.array([[0, 1, 2], [3, 4, 5]]), 7) == 2  # vertex 6 in no face: no piece
     assert piece_count(np.array([[0, 1, 2], [2, 3, 4]]), 5) == 1  # touching at a vertex: one piece

@@ -222,15 +222,28 @@ seams or hard edges, as glTF exporters write them) and are draped as one (``gars
 def weld_index(vertices: np.ndarray, faces: np.ndarray, tolerance: float = WELD_TOLERANCE) -> np.ndarray | None:
     """(N,) the welded vertex of each vertex when some lie within ``tolerance`` of another without sharing an edge
     with it (groups chain: a within reach of b, b of c), numbered by each group's lowest vertex index; None when no
-    two do. A mesh's own short edges are left alone (remeshers leave some of a few micrometres)."""
+    two do. A mesh's own short edges are left alone (remeshers leave some of a few micrometres), also where a seam
+    crosses one: a pair is not welded where one of them lies nearer a mesh neighbour of the other than the other
+    itself (it is that neighbour's copy)."""
     from scipy.sparse.csgraph import connected_components
     from scipy.spatial import cKDTree
 
-    n = len(vertices)
-    pairs = cKDTree(np.asarray(vertices, dtype=np.float64)).query_pairs(tolerance, output_type="ndarray")  # i < j
+    v = np.asarray(vertices, dtype=np.float64)
+    n = len(v)
+    pairs = cKDTree(v).query_pairs(tolerance, output_type="ndarray")  # i < j
     if len(pairs):
         edges = unique_edges(faces)  # i < j too
         pairs = pairs[~np.isin(pairs[:, 0] * n + pairs[:, 1], edges[:, 0] * n + edges[:, 1])]
+    if len(pairs):
+        adjacency = edge_adjacency(edges, n)
+        gap = np.linalg.norm(v[pairs[:, 0]] - v[pairs[:, 1]], axis=1)
+        keep = np.ones(len(pairs), dtype=bool)
+        for a, b in ((0, 1), (1, 0)):  # b nearer a neighbour k of a than to a: b is k's copy
+            rows = adjacency[pairs[:, a]]
+            owner = np.repeat(np.arange(len(pairs)), np.diff(rows.indptr))
+            near = np.linalg.norm(v[rows.indices] - v[pairs[owner, b]], axis=1) < gap[owner]
+            keep[owner[near]] = False
+        pairs = pairs[keep]
     if len(pairs) == 0:
         return None
     return connected_components(edge_adjacency(pairs, n), directed=False)[1].astype(np.int64)
