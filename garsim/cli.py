@@ -199,7 +199,7 @@ def cmd_view(args: argparse.Namespace) -> int:
     from garsim.view import ViewerUnavailable, serve
 
     try:
-        serve(args.path, host=args.host, port=args.port, block=True)
+        serve(args.path, host=args.host, port=args.port, block=True, up=args.up, units=args.units)
     except ViewerUnavailable as exc:
         print(exc, file=sys.stderr)
         return 2
@@ -227,16 +227,17 @@ def _drape_outputs(args: argparse.Namespace, batch: bool) -> tuple[Path | None, 
 
 
 def _drape_targets(values: list[str]) -> list[Path]:
-    """The target meshes: each file given, and each folder's mesh files sorted by name."""
+    """The target meshes: each file given, and each folder's mesh files in name order (numbers by value)."""
+    from garsim.geometry.io import natural_order
+
     paths = []
     for value in values:
         p = Path(value)
         if not p.is_dir():
             paths.append(p)  # a missing or unreadable file is reported when it is read
             continue
-        found = sorted(
-            (q for q in p.iterdir() if q.suffix.lower() in MESH_INPUTS and not q.name.startswith(".") and q.is_file()),
-            key=lambda q: q.name,
+        found = natural_order(
+            q for q in p.iterdir() if q.suffix.lower() in MESH_INPUTS and not q.name.startswith(".") and q.is_file()
         )
         if not found:
             raise ValueError(f"--target {p}: the folder has no mesh files ({', '.join(MESH_INPUTS)})")
@@ -302,9 +303,11 @@ def cmd_drape(args: argparse.Namespace) -> int:
             from garsim.geometry.render import render_views
 
             render_views(png_path, [(sample.body_target, sample.body_faces), (pred, gf)])
-        # --y-up rotates a Z-up result for Blender/glTF; with --up y the result is already in the input's Y-up axis
+        # a Z-up result is turned Y-up for glTF (its axis, as `garsim animate` writes it) and with --y-up (Blender);
+        # with --up y the result is already in the input's Y-up axis
+        y_up = args.up == "z" and (args.y_up or path.suffix.lower() in (".glb", ".gltf"))
         attrs = None if attributes.empty else attributes.recompute_normals(verts, gf)
-        save_mesh(path, verts, gf, y_up=args.y_up and args.up == "z", attributes=attrs)
+        save_mesh(path, verts, gf, y_up=y_up, attributes=attrs)
         print(path)
         if png_path is not None:
             print(png_path)
@@ -335,10 +338,10 @@ def _load_targets(src: Path, faces: object) -> list:
     the canonical body's topology."""
     import numpy as np
 
-    from garsim.geometry.io import MeshError, load_mesh
+    from garsim.geometry.io import MeshError, load_mesh, natural_order
 
     if src.is_dir():
-        files = sorted(src.glob("*.obj"))
+        files = natural_order(src.glob("*.obj"))  # frame_2 before frame_10
         if not files:
             raise ValueError(f"--targets {src}: the folder has no .obj files")
         targets = []
@@ -399,10 +402,21 @@ def cmd_animate(args: argparse.Namespace) -> int:
     from garsim.export import animation_files, export_animation
     from garsim.geometry.io import from_internal, load_mesh, load_mesh_with_attributes
 
+    inputs = (("--garment", args.garment), ("--canonical", args.canonical), ("--poses", args.poses))
     for o in animation_files(out, with_body=True):  # a .pc2 also writes <stem>.obj and the body's files
-        for flag, given in (("--garment", args.garment), ("--canonical", args.canonical), ("--poses", args.poses)):
+        for flag, given in (*inputs, ("--targets", args.targets)):
             if given and _same_file(o, given):
                 raise ValueError(f"--out {out} would overwrite the input {flag} {given} (as {o}); write elsewhere")
+        if (
+            args.targets
+            and o.suffix.lower() == ".obj"
+            and Path(args.targets).is_dir()
+            and _same_file(o.parent, args.targets)
+        ):
+            raise ValueError(
+                f"--out {out} would write {o.name} into the --targets folder {args.targets} (a body OBJ there is a "
+                "target); write elsewhere"
+            )
     fabric_fields(args.fabric)
     smoothing = check_smoothing(SequenceConfig.smoothing if args.smoothing is None else args.smoothing)
     pinned = "auto" if args.pinned == "auto" else _read_pinned(args.pinned) if args.pinned else None
@@ -458,10 +472,12 @@ def cmd_animate(args: argparse.Namespace) -> int:
         print(view.save_npz(out))
         return 0
     extra = {} if uvs is None else {"uvs": uvs}
-    if attributes.normals is not None:  # the garment came with normals: each frame gets its own
+    if attributes.normals is not None:  # the garment came with normals: each frame gets its own, facing as given
         from garsim.geometry.mesh import vertex_normals
 
-        extra["normals"] = np.stack([vertex_normals(f, gf) for f in frames]).astype(np.float32)
+        given = attributes.normals[attributes.normal_faces]  # (F, 3 corners, 3)
+        side = 1.0 if np.sum(vertex_normals(gv, gf)[gf] * given) >= 0 else -1.0  # against the winding: flipped
+        extra["normals"] = np.stack([side * vertex_normals(f, gf) for f in frames]).astype(np.float32)
     metadata = {
         **sim.sequence_metadata(args.fabric, smoothing),
         "input_up": args.up,  # glTF and the previews are converted to Y-up / Z-up metres; USD declares its own
@@ -810,6 +826,18 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument("--port", type=int, default=8080, help="port (the next free one if taken)")
     p.add_argument("--host", default="127.0.0.1", help="address to listen on (0.0.0.0: every interface)")
+    p.add_argument(
+        "--up",
+        choices=("z", "y"),
+        default=None,
+        help="up axis of a .pc2 or OBJ input (default: as garsim wrote in the OBJ, else z; glTF and USD say their own)",
+    )
+    p.add_argument(
+        "--units",
+        choices=("m", "cm", "mm"),
+        default=None,
+        help="units of a .pc2 or OBJ input (default: as garsim wrote, else m)",
+    )
     p.set_defaults(func=cmd_view)
 
     p = command("drape", "drape a garment mesh from a canonical body onto a target body (or several: batch mode)")
@@ -853,7 +881,11 @@ def build_parser() -> argparse.ArgumentParser:
         default="m",
         help="length unit of the input and output (a glTF/GLB output is in metres, as glTF requires)",
     )
-    p.add_argument("--y-up", action="store_true", help="write a Z-up result Y-up (Blender/glTF); implied by --up y")
+    p.add_argument(
+        "--y-up",
+        action="store_true",
+        help="write a Z-up result Y-up (Blender); implied by --up y, and always done for a glTF/GLB output",
+    )
     p.add_argument("--prior-only", action="store_true", help="use the skinning prior, not the model")
     p.set_defaults(func=cmd_drape)
 

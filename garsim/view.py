@@ -1,12 +1,14 @@
 """``garsim view``: an interactive browser viewer (viser) for drapes and animations.
 
-Reads a ``.glb``/``.gltf`` written by :mod:`garsim.export` (frames rebuilt from the morph targets), a USD stage
-(``.usd``/``.usda``/``.usdc``: time-sampled points, in its declared axis and unit), an ``.npz``
-with ``frames`` (T, N, 3) and ``faces`` (optional ``body_frames`` (T, Vb, 3) or (Vb, 3), ``body_faces``,
-``prior_frames`` (T, N, 3), ``fps``), a ``.pc2`` (+ the OBJ beside it, and ``<stem>_body.pc2``), one mesh
-file, or a folder of OBJs (one sequence, sorted by name; files whose name contains ``body`` / ``prior``
-are the body / the prior). The page has a frame slider with play, body and garment toggles and, when a prior
-is present, a prior-vs-prediction toggle and the correction ``|prediction - prior|`` as vertex colour.
+Reads a ``.glb``/``.gltf`` written by :mod:`garsim.export` (frames rebuilt from the morph targets, placed by the
+node transforms), a USD stage (``.usd``/``.usda``/``.usdc``: time-sampled points, through the prims' transforms, in
+its declared axis and unit), an ``.npz`` with ``frames`` (T, N, 3) and ``faces`` (optional ``body_frames`` (T, Vb, 3)
+or (Vb, 3), ``body_faces``, ``prior_frames`` (T, N, 3), ``fps``), a ``.pc2`` (+ the OBJ beside it, and
+``<stem>_body.pc2``), one mesh file, or a folder of OBJs (one sequence in name order, numbers by value; files whose
+name contains ``body`` / ``prior`` are the body / the prior); a .pc2 or OBJ in the ``up`` axis and ``units`` given,
+else as garsim's metadata line in the OBJ says, else Z-up metres. The page has a frame slider with play, body and
+garment toggles and, when a prior is present, a prior-vs-prediction toggle and the correction
+``|prediction - prior|`` as vertex colour.
 
 viser is an optional extra (``pip install 'garsim[view]'``), imported only by :func:`serve`.
 """
@@ -16,7 +18,6 @@ from __future__ import annotations
 import itertools
 import json
 import re
-import struct
 import threading
 import time
 from dataclasses import dataclass
@@ -25,6 +26,7 @@ from typing import Any
 
 import numpy as np
 
+from garsim.geometry.io import to_internal
 from garsim.geometry.mesh import vertex_normals
 
 VIEWER_NEEDS = "garsim view needs viser: pip install 'garsim[view]'"
@@ -115,32 +117,6 @@ def _faces(faces: Any, n: int, what: str) -> np.ndarray:
 # ----------------------------------------------------------------------------- readers
 
 
-def _read_gltf_document(path: Path) -> tuple[dict, bytes]:
-    data = path.read_bytes()
-    if path.suffix.lower() == ".gltf":
-        import base64
-
-        doc = json.loads(data)
-        uri = doc["buffers"][0].get("uri", "")
-        if not uri.startswith("data:"):
-            raise ValueError(f"{path}: only .gltf files with an embedded (base64) buffer are supported")
-        return doc, base64.b64decode(uri.split(",", 1)[1])
-    if len(data) < 20:
-        raise ValueError(f"{path}: not a GLB file (too short)")
-    magic, version, total = struct.unpack_from("<III", data, 0)
-    if magic != 0x46546C67 or version != 2:
-        raise ValueError(f"{path}: not a glTF 2.0 binary (.glb)")
-    if total > len(data):
-        raise ValueError(f"{path}: truncated GLB ({len(data)} of {total} bytes)")
-    json_len, _ = struct.unpack_from("<II", data, 12)
-    doc = json.loads(data[20 : 20 + json_len])
-    blob = b""
-    if 28 + json_len <= len(data):
-        bin_len, _ = struct.unpack_from("<II", data, 20 + json_len)
-        blob = data[28 + json_len : 28 + json_len + bin_len]
-    return doc, blob
-
-
 _COMPONENTS = {5126: "<f4", 5125: "<u4", 5123: "<u2", 5121: "u1"}
 _WIDTHS = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4}
 
@@ -181,10 +157,40 @@ def _z_up(points: np.ndarray) -> np.ndarray:
     return np.stack([points[..., 0], -points[..., 2], points[..., 1]], axis=-1)
 
 
+def _gltf_mesh_matrices(doc: dict) -> dict[int, np.ndarray]:
+    """Mesh index -> the 4x4 world matrix of the first node of the default scene that shows it (node matrices or
+    translation / rotation / scale, parents first)."""
+    from scipy.spatial.transform import Rotation
+
+    nodes = doc.get("nodes") or []
+    scenes = doc.get("scenes") or [{"nodes": list(range(len(nodes)))}]
+    out: dict[int, np.ndarray] = {}
+
+    def local(node: dict) -> np.ndarray:
+        if "matrix" in node:
+            return np.asarray(node["matrix"], dtype=np.float64).reshape(4, 4).T  # stored column by column
+        m = np.eye(4)
+        rotation = Rotation.from_quat(node.get("rotation", [0.0, 0.0, 0.0, 1.0])).as_matrix()  # (x, y, z, w)
+        m[:3, :3] = rotation * np.asarray(node.get("scale", [1.0, 1.0, 1.0]), dtype=np.float64)
+        m[:3, 3] = node.get("translation", [0.0, 0.0, 0.0])
+        return m
+
+    stack = [(i, np.eye(4)) for i in reversed(scenes[int(doc.get("scene", 0))].get("nodes", []))]
+    while stack:
+        i, parent = stack.pop()
+        world = parent @ local(nodes[i])
+        if "mesh" in nodes[i]:
+            out.setdefault(int(nodes[i]["mesh"]), world)
+        stack.extend((c, world) for c in reversed(nodes[i].get("children", [])))
+    return out
+
+
 def load_gltf(path: str | Path) -> ViewData:
     """A .glb/.gltf written by garsim.export (or any glTF whose meshes animate by morph targets)."""
     p = Path(path)
-    doc, blob = _read_gltf_document(p)
+    from garsim.geometry.io import read_gltf_document
+
+    doc, blob = read_gltf_document(p)
     meshes = doc.get("meshes") or []
     if not meshes:
         raise ValueError(f"{p}: the glTF holds no mesh")
@@ -198,8 +204,11 @@ def load_gltf(path: str | Path) -> ViewData:
     extras = doc.get("extras") or {}
     y_up = str(extras.get("up", "Y")).upper() != "Z"
     out: dict[str, Any] = {}
+    matrices = _gltf_mesh_matrices(doc)
     for role, m in roles.items():
         frames, faces = _gltf_mesh_frames(doc, blob, m)
+        world = matrices.get(next(i for i, x in enumerate(meshes) if x is m), np.eye(4))
+        frames = (frames @ world[:3, :3].T + world[:3, 3]).astype(np.float32)
         out[role] = (_z_up(frames) if y_up else frames, faces)
     frames, faces = out["garment"]
     body = out.get("body")
@@ -238,12 +247,13 @@ def load_npz(path: str | Path) -> ViewData:
 _FRAME_NUMBER = re.compile(r"[_\-.]?\d+$")
 
 
-def load_obj_folder(path: str | Path) -> ViewData:
-    """A folder of OBJs, one sequence sorted by name; names with ``body`` / ``prior`` are the body / the prior."""
-    from garsim.geometry.io import load_mesh
+def load_obj_folder(path: str | Path, up: str | None = None, units: str | None = None) -> ViewData:
+    """A folder of OBJs, one sequence in name order (numbers by value); names with ``body`` / ``prior`` are the body
+    / the prior; in ``up`` axis and ``units`` (default: as garsim's metadata in the first OBJ says, else Z-up m)."""
+    from garsim.geometry.io import load_mesh, natural_order
 
     p = Path(path)
-    files = sorted(q for q in p.iterdir() if q.suffix.lower() == ".obj")
+    files = natural_order(q for q in p.iterdir() if q.suffix.lower() == ".obj")  # frame_2 before frame_10
     if not files:
         raise ValueError(f"{p}: no .obj files in the folder")
     groups: dict[str, list[Path]] = {}
@@ -273,8 +283,9 @@ def load_obj_folder(path: str | Path) -> ViewData:
             raise ValueError(
                 f"{p}: the '{stem}' OBJs differ in vertex count {sorted(sizes)}; a sequence shares one mesh"
             )
-        return np.stack([v for v, _ in meshes]), meshes[0][1]
+        return to_internal(np.stack([v for v, _ in meshes]), *axes), meshes[0][1]
 
+    axes = _obj_axes(roles["garment"][0][1][0], up, units)
     garment = read(roles["garment"])
     assert garment is not None
     frames, faces = garment
@@ -294,15 +305,22 @@ def load_obj_folder(path: str | Path) -> ViewData:
 
 
 def _usd_mesh(stage: Any, prim: Any, name: str) -> tuple[np.ndarray, np.ndarray]:
-    """(T, V, 3) points over the stage's time samples (or its one default value) and (F, 3) triangles of a mesh."""
-    from pxr import UsdGeom
+    """(T, V, 3) points over the stage's time samples (or its one default value), in the stage's frame (the prim's
+    transform ops applied), and (F, 3) triangles of a mesh."""
+    from pxr import Usd, UsdGeom
 
     from garsim.geometry.io import triangulate_polygons
 
     mesh = UsdGeom.Mesh(prim)
     points = mesh.GetPointsAttr()
     times = points.GetTimeSamples() or [None]
-    frames = np.stack([np.asarray(points.Get() if t is None else points.Get(t), dtype=np.float64) for t in times])
+    frames = []
+    for t in times:  # the points in the stage's frame: through the prim's and its parents' transforms at that time
+        code = Usd.TimeCode.Default() if t is None else Usd.TimeCode(t)
+        world = np.asarray(mesh.ComputeLocalToWorldTransform(code), dtype=np.float64)  # row vectors: p @ M
+        p = np.asarray(points.Get(code), dtype=np.float64)
+        frames.append(p @ world[:3, :3] + world[3, :3])
+    frames = np.stack(frames)
     counts = np.asarray(mesh.GetFaceVertexCountsAttr().Get())
     indices = np.asarray(mesh.GetFaceVertexIndicesAttr().Get(), dtype=np.int64)
     if len(counts) == 0 or (counts != counts[0]).any() or counts[0] < 3:
@@ -348,13 +366,23 @@ def load_usd(path: str | Path) -> ViewData:
     )
 
 
-def load_view_data(path: str | Path) -> ViewData:
-    """Read any input of ``garsim view`` (see the module doc)."""
+def _obj_axes(obj: Path, up: str | None, units: str | None) -> tuple[str, str]:
+    """(up, units) of OBJ-based input: as given, else as the garsim metadata line of ``obj`` says (``input_up``,
+    ``input_units``: what ``garsim animate`` wrote), else Z-up metres."""
+    from garsim.export import read_obj_metadata
+
+    meta = read_obj_metadata(obj) if (up is None or units is None) and obj.is_file() else {}
+    return up or str(meta.get("input_up", "z")), units or str(meta.get("input_units", "m"))
+
+
+def load_view_data(path: str | Path, up: str | None = None, units: str | None = None) -> ViewData:
+    """Read any input of ``garsim view`` (see the module doc). ``up`` and ``units`` describe a .pc2, OBJ or other
+    mesh file (default: garsim's metadata in the OBJ, else Z-up metres); glTF, USD and .npz carry their own."""
     p = Path(path)
     if not p.exists():
         raise FileNotFoundError(f"{p}: no such file or folder")
     if p.is_dir():
-        return load_obj_folder(p)
+        return load_obj_folder(p, up, units)
     ext = p.suffix.lower()
     if ext in (".glb", ".gltf"):
         return load_gltf(p)
@@ -370,13 +398,14 @@ def load_view_data(path: str | Path) -> ViewData:
         obj = p.with_suffix(".obj")
         if not obj.exists():
             raise FileNotFoundError(f"{p}: the PC2 needs its mesh beside it ({obj.name})")
+        axes = _obj_axes(obj, up, units)
         faces = load_mesh(obj)[1]
         body_pc2 = p.with_name(f"{p.stem}_body.pc2")
         body = None
         if body_pc2.exists() and body_pc2.with_suffix(".obj").exists():
-            body = (read_pc2(body_pc2)[0], load_mesh(body_pc2.with_suffix(".obj"))[1])
+            body = (to_internal(read_pc2(body_pc2)[0], *axes), load_mesh(body_pc2.with_suffix(".obj"))[1])
         return ViewData(
-            frames,
+            to_internal(frames, *axes),
             faces,
             body_frames=None if body is None else body[0],
             body_faces=None if body is None else body[1],
@@ -385,7 +414,8 @@ def load_view_data(path: str | Path) -> ViewData:
     from garsim.geometry.io import load_mesh
 
     v, f = load_mesh(p)
-    return ViewData(v[None], f, name=p.name)
+    axes = _obj_axes(p, up, units) if ext == ".obj" else (up or "z", units or "m")
+    return ViewData(to_internal(v, *axes)[None], f, name=p.name)
 
 
 # ----------------------------------------------------------------------------- the viewer
@@ -556,13 +586,20 @@ def _import_viser() -> Any:
     return viser
 
 
-def serve(path: str | Path, host: str = "127.0.0.1", port: int = 8080, block: bool = True) -> Viewer:
+def serve(
+    path: str | Path,
+    host: str = "127.0.0.1",
+    port: int = 8080,
+    block: bool = True,
+    up: str | None = None,
+    units: str | None = None,
+) -> Viewer:
     """Serve ``path`` in the browser at http://host:port (the next free port if taken) -> the :class:`Viewer`.
 
     ``block=True`` runs until Ctrl-C, then stops the server; ``block=False`` returns at once (call
-    ``viewer.stop()``; ``viewer.server`` is the ``viser.ViserServer``).
+    ``viewer.stop()``; ``viewer.server`` is the ``viser.ViserServer``). ``up``, ``units``: as :func:`load_view_data`.
     """
-    data = load_view_data(path)  # bad input fails before a server starts
+    data = load_view_data(path, up, units)  # bad input fails before a server starts
     viser = _import_viser()
     server = viser.ViserServer(host=host, port=port, verbose=False)
     try:

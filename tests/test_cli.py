@@ -537,6 +537,7 @@ def test_drape_batch_writes_one_output_per_target(scene, tmp_path, capsys):
     from mesh_fixtures import obj_lists, seamed_obj_text
 
     from garsim import GarSim
+    from garsim.geometry.io import load_mesh
 
     folder, meshes = scene
     c, faces, g = np.asarray(meshes["c"].vertices), np.asarray(meshes["c"].faces), meshes["g"]
@@ -560,8 +561,8 @@ def test_drape_batch_writes_one_output_per_target(scene, tmp_path, capsys):
     files = [str(bodies / "c.obj"), str(bodies / "a.obj")]
     assert main([*argv, "--target", *files, "--format", "glb", "--out", str(out2)]) == 0
     assert capsys.readouterr().out.split() == [str(out2 / "c.glb"), str(out2 / "a.glb")]  # in the order given
-    glb = trimesh.load(out2 / "c.glb", force="mesh", process=False)
-    np.testing.assert_allclose(glb.vertices, np.asarray(g.vertices) - [0, 0, 0.05], atol=1e-5)
+    glb = load_mesh(out2 / "c.glb", y_up=True)[0]  # glTF is Y up
+    np.testing.assert_allclose(glb, np.asarray(g.vertices) - [0, 0, 0.05], atol=1e-5)
 
 
 @pytest.mark.parametrize(
@@ -642,6 +643,16 @@ def test_drape_pinned_auto_keeps_the_top_loop_on_the_prior(scene, tmp_path):
             "pc2 whose OBJ is the garment",
             ["--motion", "walk", "--out", "{g}.pc2"],
             "would overwrite the input --garment",
+        ),
+        (
+            "output over the targets",
+            ["--canonical", "{c}", "--targets", "flat.npz", "--out", "flat.npz"],
+            "would overwrite the input --targets",
+        ),
+        (
+            "pc2 into the targets folder",
+            ["--canonical", "{c}", "--targets", "other/", "--out", "other/0.pc2"],
+            "would write 0.obj into the --targets folder",
         ),
     ],
 )
@@ -871,7 +882,8 @@ def test_a_reader_that_goes_away_ends_the_command_quietly(monkeypatch, capsys):
 
 
 def test_drape_writes_glb_in_metres_and_obj_in_the_input_units(scene, tmp_path):
-    """The scene in centimetres (--units cm): the OBJ output is in centimetres like the input, the GLB in metres."""
+    """The scene in centimetres (--units cm): the OBJ output is in centimetres like the input, the GLB in metres and
+    Y up, as glTF requires (and `garsim animate` writes it)."""
     from garsim import GarSim
     from garsim.geometry.io import load_mesh
 
@@ -883,4 +895,5 @@ def test_drape_writes_glb_in_metres_and_obj_in_the_input_units(scene, tmp_path):
     metres = GarSim.prior_only().drape(meshes["c"], meshes["t"], meshes["g"])
     for ext, scale in ((".obj", 100.0), (".glb", 1.0)):
         assert main([*argv, "--out", str(tmp_path / f"out{ext}")]) == 0
-        np.testing.assert_allclose(load_mesh(tmp_path / f"out{ext}")[0], metres * scale, atol=1e-4 * scale)
+        got = load_mesh(tmp_path / f"out{ext}", y_up=ext == ".glb")[0]
+        np.testing.assert_allclose(got, metres * scale, atol=1e-4 * scale)

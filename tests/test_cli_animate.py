@@ -189,3 +189,34 @@ def test_npz_output_is_the_viewers_sequence_with_the_prior(case, tmp_path):
     np.testing.assert_allclose(view.prior_frames, read_pc2(tmp_path / "p.pc2")[0], atol=1e-5)
     np.testing.assert_allclose(view.body_frames, bodies, atol=1e-5)
     assert view.correction().max() > 0.005
+
+
+def test_a_folder_of_unpadded_frames_plays_in_number_order_and_normals_face_as_given(case, tmp_path):
+    """Target OBJs named frame_1 .. frame_10 (no zero padding) are the frames in number order, not name order; a
+    garment whose normals point against its winding gets per-frame normals that point the same way."""
+    from pxr import Usd, UsdGeom
+
+    from garsim.export import read_pc2
+    from garsim.geometry.io import MeshAttributes, save_mesh
+    from garsim.geometry.mesh import vertex_normals
+
+    folder, g, _, bodies, faces = case
+    targets = tmp_path / "targets"
+    targets.mkdir()
+    numbers = [1, 2, 10]
+    for k, n in enumerate(numbers):
+        save_mesh(targets / f"frame_{n}.obj", bodies[k], faces)
+    inward = -vertex_normals(g.vertices, g.faces)
+    garment = tmp_path / "inward.obj"
+    save_mesh(garment, g.vertices, g.faces, attributes=MeshAttributes(normals=inward, normal_faces=g.faces))
+    base = ["animate", "--garment", str(garment), "--canonical", str(folder / "canonical.obj"), "--prior-only"]
+    base += ["--targets", str(targets), "--quiet"]
+    assert main([*base, "--out", str(tmp_path / "a.pc2")]) == 0
+    np.testing.assert_allclose(read_pc2(tmp_path / "a_body.pc2")[0], bodies, atol=1e-5)
+    assert main([*base, "--out", str(tmp_path / "a.usda")]) == 0
+    stage = Usd.Stage.Open(str(tmp_path / "a.usda"))  # held: its prims live as long as the stage
+    mesh = UsdGeom.Mesh(stage.GetPrimAtPath("/Scene/Garment"))
+    for t in range(len(numbers)):
+        points = np.asarray(mesh.GetPointsAttr().Get(float(t)))
+        normals = np.asarray(mesh.GetNormalsAttr().Get(float(t)))
+        assert np.mean(np.sum(normals * vertex_normals(points, g.faces), axis=1) < 0) > 0.99

@@ -324,3 +324,92 @@ def test_indented_malformed_obj_line_is_refused(tmp_path):
     path.write_text("v 0 0 0\n  v 1 0\nv 1 0 0\nv 0 1 0\nv 1 1 0\nf 1 2 3\nf 2 4 3\n")
     with pytest.raises(MeshError, match="line 2"):
         load_mesh(path)
+
+
+def test_obj_spellings_from_other_tools_read_as_the_plain_file(tmp_path, icosphere):
+    """A UTF-8 byte-order mark, old Mac line ends and relative (negative) indices with UVs and normals give the
+    same mesh and attributes as the plain file (the mark used to hide the first vertex, shifting every index)."""
+    v, f = icosphere
+    text, _, _ = seamed_obj_text(v, f, normals=True)
+    plain = tmp_path / "plain.obj"
+    plain.write_text(text)
+    ref_v, ref_f, ref_a = load_mesh_with_attributes(plain)
+    lines = text.splitlines()
+    seen = {"v": 0, "vt": 0, "vn": 0}
+    relative = []
+    for line in lines:  # every index counted back from the lines above its face
+        kind = line.split()[0] if line.split() else ""
+        if kind in seen:
+            seen[kind] += 1
+        if kind == "f":
+            corners = [c.split("/") for c in line.split()[1:]]
+            back = [
+                "/".join("" if x == "" else str(int(x) - seen[k] - 1) for x, k in zip(c, ("v", "vt", "vn")))
+                for c in corners
+            ]
+            line = "f " + " ".join(back)
+        relative.append(line)
+    variants = {
+        "bom.obj": b"\xef\xbb\xbf" + text.encode(),
+        "mac.obj": text.replace("\n", "\r").encode(),
+        "relative.obj": "\n".join(relative).encode(),
+    }
+    for name, data in variants.items():
+        (tmp_path / name).write_bytes(data)
+        got_v, got_f, got_a = load_mesh_with_attributes(tmp_path / name)
+        np.testing.assert_array_equal(got_v, ref_v, err_msg=name)
+        np.testing.assert_array_equal(got_f, ref_f, err_msg=name)
+        np.testing.assert_array_equal(got_a.uvs[got_a.uv_faces], ref_a.uvs[ref_a.uv_faces], err_msg=name)
+        np.testing.assert_array_equal(got_a.normals[got_a.normal_faces], ref_a.normals[ref_a.normal_faces])
+    comma = tmp_path / "comma.obj"
+    comma.write_text("# exported\nv 0 0 0\nv 1,5 0 0\nv 0 1 0\nf 1 2 3\n")
+    with pytest.raises(MeshError, match=r"line 3 'v 1,5 0 0' is malformed: .*decimal points"):
+        load_mesh(comma)
+
+
+def _glb_with(tmp_path, name: str, **extra) -> object:
+    """A one-triangle GLB whose JSON document has ``extra`` keys merged in (``meshes`` entries updated)."""
+    import json
+    import struct
+
+    tri = trimesh.Trimesh([[0, 0, 0], [1, 0, 0], [0, 1, 0]], [[0, 1, 2]], process=False)
+    data = tri.export(file_type="glb")
+    n = struct.unpack_from("<I", data, 12)[0]
+    doc = json.loads(data[20 : 20 + n])
+    for key, value in extra.items():
+        if key == "mesh":
+            doc["meshes"][0].update(value)
+        else:
+            doc[key] = value
+    chunk = json.dumps(doc).encode()
+    chunk += b" " * (-len(chunk) % 4)
+    rest = data[20 + n :]
+    out = struct.pack("<III", 0x46546C67, 2, 20 + len(chunk) + len(rest)) + struct.pack("<II", len(chunk), 0x4E4F534A)
+    path = tmp_path / name
+    path.write_bytes(out + chunk + rest)
+    return path
+
+
+def test_gltf_geometry_that_is_not_the_shape_shown_is_refused(tmp_path):
+    """Compressed geometry, a skin (the stored mesh is the bind pose) and weighted morph targets would be read as
+    a wrong shape without a word: each is refused with what to do."""
+    plain = _glb_with(tmp_path, "plain.glb")
+    assert load_mesh(plain)[1].tolist() == [[0, 1, 2]]
+    cases = {
+        "draco.glb": ({"extensionsRequired": ["KHR_draco_mesh_compression"]}, "without compression"),
+        "skinned.glb": ({"skins": [{"joints": [0]}]}, "armature applied"),
+        "keys.glb": ({"mesh": {"weights": [0.0, 0.5]}}, "shape keys applied"),
+    }
+    for name, (extra, message) in cases.items():
+        with pytest.raises(MeshError, match=message):
+            load_mesh(_glb_with(tmp_path, name, **extra))
+
+
+def test_natural_order_puts_frame_2_before_frame_10(tmp_path):
+    from pathlib import Path
+
+    from garsim.geometry.io import natural_order
+
+    names = ["frame_10.obj", "frame_2.obj", "Frame_1.obj", "frame_0002.obj", "body.obj"]
+    got = [p.name for p in natural_order(Path(n) for n in names)]
+    assert got == ["body.obj", "Frame_1.obj", "frame_0002.obj", "frame_2.obj", "frame_10.obj"]  # ties: plain name

@@ -112,6 +112,64 @@ def test_usd_in_its_declared_axis_and_unit_reads_as_z_up_metres(tmp_path, scene)
         np.testing.assert_array_equal(d.faces, scene["faces"])
 
 
+def test_transforms_in_the_file_place_the_mesh(tmp_path, scene):
+    """A glTF node's scale / turn / move and a USD prim's transform ops are applied, as every other reader does."""
+    import trimesh
+    from pxr import Usd, UsdGeom
+
+    from garsim.geometry.io import load_mesh
+
+    v, f = scene["frames"][0], scene["faces"]
+    turn = trimesh.transformations.rotation_matrix(np.pi / 3, [0, 1, 0])
+    node = trimesh.transformations.translation_matrix([0.1, 0.2, 0.3]) @ turn @ np.diag([0.01, 0.01, 0.01, 1.0])
+    glb = tmp_path / "node.glb"
+    scene_graph = trimesh.Scene()
+    scene_graph.add_geometry(trimesh.Trimesh(v * 100.0, f, process=False), transform=node)
+    glb.write_bytes(scene_graph.export(file_type="glb"))
+    expected = load_mesh(glb, y_up=True)[0]  # trimesh's scene graph, read as a Y-up file
+    assert np.ptp(expected, axis=0).max() < 0.5  # the node's 0.01 scale applied (40 m across without it)
+    np.testing.assert_allclose(load_view_data(glb).frames[0], expected, atol=1e-5)
+
+    path = tmp_path / "xf.usda"
+    stage = Usd.Stage.CreateNew(str(path))
+    UsdGeom.SetStageUpAxis(stage, UsdGeom.Tokens.z)
+    UsdGeom.SetStageMetersPerUnit(stage, 1.0)
+    mesh = UsdGeom.Mesh.Define(stage, "/World/Garment")
+    mesh.CreatePointsAttr([tuple(map(float, p)) for p in v * 100.0])
+    mesh.CreateFaceVertexCountsAttr([3] * len(f))
+    mesh.CreateFaceVertexIndicesAttr([int(i) for i in f.ravel()])
+    xf = UsdGeom.Xformable(mesh)
+    xf.AddTranslateOp().Set((1.0, 0.0, 0.0))
+    xf.AddScaleOp().Set((0.01, 0.01, 0.01))
+    stage.Save()
+    np.testing.assert_allclose(load_view_data(path).frames[0], v + np.float32([1.0, 0.0, 0.0]), atol=1e-5)
+
+
+def test_pc2_and_objs_in_their_axis_and_unit(tmp_path, scene):
+    """A PC2 from `garsim animate --up y --units cm` reads in the axis and unit its OBJ's metadata names; plain OBJs
+    take --up / --units; a folder's frames go in number order (frame_2 before frame_10)."""
+    from garsim.export import export_animation, write_obj
+    from garsim.geometry.io import from_internal
+
+    kw = {"body_frames": from_internal(scene["body_frames"], "y", "cm"), "body_faces": scene["body_faces"]}
+    meta = {"input_up": "y", "input_units": "cm"}
+    pc2 = export_animation(
+        tmp_path / "a.pc2", from_internal(scene["frames"], "y", "cm"), scene["faces"], metadata=meta, **kw
+    )[0]
+    d = load_view_data(pc2)
+    np.testing.assert_allclose(d.frames, scene["frames"], atol=1e-5)
+    np.testing.assert_allclose(d.body_frames, scene["body_frames"], atol=1e-5)
+    plain = tmp_path / "plain.obj"
+    write_obj(plain, from_internal(scene["frames"][0], "y", "mm"), scene["faces"])
+    np.testing.assert_allclose(load_view_data(plain, up="y", units="mm").frames[0], scene["frames"][0], atol=1e-5)
+    folder = tmp_path / "unpadded"
+    folder.mkdir()
+    order = [1, 2, 10]  # name order would play 1, 10, 2
+    for k, t in enumerate(order):
+        write_obj(folder / f"frame_{t}.obj", scene["frames"][k], scene["faces"])
+    np.testing.assert_allclose(load_view_data(folder).frames, scene["frames"], atol=1e-6)
+
+
 def test_serve_npz_with_prior(npz, scene):
     pytest.importorskip("viser")
     from garsim.view import serve

@@ -15,6 +15,8 @@ comment line ``# garsim {...json...}`` after the ``# garsim export`` header; OBJ
 
 from __future__ import annotations
 
+import itertools
+import json
 import os
 import struct
 from collections.abc import Mapping
@@ -96,6 +98,9 @@ def write_pc2_animation(
     timing = _check_timing(start, rate)
     parts = [a] if a.body is None else [a, Animation(*a.body)]
     files = pc2_files(p, with_body=a.body is not None)
+    for file in files:  # nothing is written when one of the set cannot be
+        if file.is_dir():
+            raise ExportError(f"write_pc2_animation: {file} is a folder; the PC2 set needs that name for its file")
     data = [blob for part in parts for blob in (_pc2_bytes(part.frames, *timing), _frame_obj(part, 0))]
     return [atomic_write_bytes(file, blob) for file, blob in zip(files, data)]
 
@@ -122,6 +127,20 @@ def read_pc2(path: str | os.PathLike) -> tuple[np.ndarray, float, float]:
 
 
 OBJ_METADATA_PREFIX = "# garsim "
+
+
+def read_obj_metadata(path: str | os.PathLike) -> dict[str, Any]:
+    """The ``# garsim {json}`` metadata line of an OBJ written by garsim (``{}`` when the file has none)."""
+    prefix = OBJ_METADATA_PREFIX.encode() + b"{"
+    with open(path, "rb") as f:
+        for line in itertools.islice(f, 4):  # the header's comment lines come first
+            if line.startswith(prefix):
+                try:
+                    meta = json.loads(line[len(prefix) - 1 :])
+                except ValueError:
+                    return {}
+                return meta if isinstance(meta, dict) else {}
+    return {}
 
 
 def _frame_obj(a: Animation, k: int) -> bytes:

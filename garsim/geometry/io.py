@@ -12,9 +12,11 @@ Repairs (documented, silent): polygons with more than three corners are triangul
 ``(F, k > 3)`` face array); unreferenced vertices are kept, so indices never shift.
 
 Vertex order: OBJ vertices are kept in file order; other files are read with ``process=False`` (no merging, no
-reordering); an OBJ the vectorised reader cannot take (relative indices, odd tokens) goes to trimesh with
-``maintain_order=True``. STL stores a triangle soup without shared vertices; it is merged on load
-(the order is then the order of first appearance) and cannot round-trip vertex order.
+reordering); an OBJ the vectorised reader cannot take (odd tokens) goes to trimesh with ``maintain_order=True``.
+Relative (negative) indices, a UTF-8 byte-order mark and ``\\r`` line ends read as in a plain file (``obj_bytes``). A
+glTF whose stored mesh is not the shape it shows (a skin, weighted morph targets, compressed geometry) is refused.
+STL stores a triangle soup without shared vertices; it is merged on load (the order is then the order of first
+appearance) and cannot round-trip vertex order.
 
 Surface attributes: :func:`load_mesh_with_attributes` also returns a :class:`MeshAttributes`: an OBJ's texture
 coordinates (``vt``) and normals (``vn``) with their own per-corner indices (UV seams, hard edges: more ``vt`` than
@@ -29,12 +31,16 @@ faces +Z as glTF expects) and ``load_mesh(..., y_up=True)`` rotates back.
 
 from __future__ import annotations
 
+import io
 import itertools
+import json
 import logging
 import os
 import re
+import struct
 import sys
 import warnings
+from collections.abc import Iterable
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
@@ -268,9 +274,10 @@ def _fan_corners(sizes: np.ndarray) -> np.ndarray:
 
 
 def _read_obj_fast(data: bytes) -> tuple[np.ndarray, np.ndarray] | None:
-    """(vertices, fan-triangulated faces) of a plain OBJ, vectorised (no trimesh import, ~10x faster to read), or
-    None when the file needs the general reader: negative (relative) indices, corners without a vertex index,
-    or tokens that are not numbers. Faces with k corners give k - 2 triangles, in file order."""
+    """(vertices, fan-triangulated faces) of a plain OBJ (``obj_bytes``' line ends), vectorised (no trimesh import,
+    ~10x faster to read), or None when the file needs the general reader: corners without a vertex index, or tokens
+    that are not numbers. Faces with k corners give k - 2 triangles, in file order; a negative (relative) index
+    counts back from the 'v' lines above its face."""
     try:
         vertices = np.array(_OBJ_V.findall(data), dtype=np.float64).reshape(-1, 3)
         lines = [line.split() for line in _OBJ_F.findall(data)]
@@ -282,8 +289,11 @@ def _read_obj_fast(data: bytes) -> tuple[np.ndarray, np.ndarray] | None:
         flat = np.array(re.sub(rb"/[^ ]*", b"", corners).split(), dtype=np.int64)
     except (ValueError, OverflowError):
         return None
-    if flat.size == 0 or flat.min() < 1:
+    if flat.size == 0 or (flat == 0).any():
         return None
+    if flat.min() < 0:  # relative indices (-1: the last 'v' line above the face): the attribute reader resolves them
+        faces = _obj_corners(_obj_plain_text(data))[:, :, 0]
+        return None if len(faces) == 0 or faces.min() < 0 else (vertices, faces)
     sizes = np.fromiter((len(line) for line in lines), dtype=np.int64, count=len(lines))
     return vertices, flat[_fan_corners(sizes)] - 1
 
@@ -294,6 +304,92 @@ def _read_file(p: Path) -> bytes:
         return p.read_bytes()
     except OSError as exc:
         raise MeshError(f"{p}: cannot read the file ({_first_line(exc)})") from None
+
+
+def natural_order(paths: Iterable[Path]) -> list[Path]:
+    """``paths`` sorted by name with runs of digits compared as numbers (``frame_2`` before ``frame_10``, as frame
+    numbers without zero padding mean), case-insensitively; ties by the plain name."""
+
+    def key(p: Path) -> tuple[list[tuple[int, int | str]], str]:
+        return [(1, int(t)) if t.isdigit() else (0, t.lower()) for t in re.split(r"(\d+)", p.name)], p.name
+
+    return sorted(paths, key=key)
+
+
+def read_gltf_document(path: Path, buffer: bool = True) -> tuple[dict, bytes]:
+    """(the JSON document, the binary buffer) of a .glb, or of a .gltf whose buffer is embedded (base64);
+    ``buffer=False``: the document alone (any .gltf). Raises ValueError for a file that is not one."""
+    data = path.read_bytes()
+    if path.suffix.lower() == ".gltf":
+        import base64
+
+        try:
+            doc = json.loads(data)
+        except ValueError as exc:
+            raise ValueError(f"{path}: not a glTF document ({_first_line(exc)})") from None
+        if not buffer or not doc.get("buffers"):
+            return doc, b""
+        uri = doc["buffers"][0].get("uri", "")
+        if not uri.startswith("data:"):
+            raise ValueError(f"{path}: only .gltf files with an embedded (base64) buffer are supported")
+        return doc, base64.b64decode(uri.split(",", 1)[1])
+    if len(data) < 20:
+        raise ValueError(f"{path}: not a GLB file (too short)")
+    magic, version, total = struct.unpack_from("<III", data, 0)
+    if magic != 0x46546C67 or version != 2:
+        raise ValueError(f"{path}: not a glTF 2.0 binary (.glb)")
+    if total > len(data):
+        raise ValueError(f"{path}: truncated GLB ({len(data)} of {total} bytes)")
+    json_len, _ = struct.unpack_from("<II", data, 12)
+    try:
+        doc = json.loads(data[20 : 20 + json_len])
+    except ValueError as exc:
+        raise ValueError(f"{path}: the GLB's JSON chunk does not parse ({_first_line(exc)})") from None
+    blob = b""
+    if buffer and 28 + json_len <= len(data):
+        bin_len, _ = struct.unpack_from("<II", data, 20 + json_len)
+        blob = data[28 + json_len : 28 + json_len + bin_len]
+    return doc, blob
+
+
+def _check_gltf(p: Path) -> None:
+    """Refuse a glTF whose stored geometry is not the shape it shows, which the mesh reader would take silently:
+    compressed geometry (a required extension), a skin (an armature poses the bind-pose mesh) or morph targets
+    with non-zero weights."""
+    try:
+        doc, _ = read_gltf_document(p, buffer=False)
+    except (OSError, ValueError) as exc:
+        raise MeshError(f"{p}: could not parse the {p.suffix.lower()} file: {_first_line(exc)}") from None
+    required = doc.get("extensionsRequired") or []
+    if required:
+        raise MeshError(
+            f"{p}: the file needs {', '.join(map(str, required))} (compressed geometry), which garsim cannot read; "
+            "export it without compression"
+        )
+    if doc.get("skins"):
+        raise MeshError(
+            f"{p}: the mesh is skinned (an armature poses it), and the file stores it in its bind pose; export the "
+            "posed mesh with the armature applied (no skin)"
+        )
+    weighted = [x for x in (*doc.get("meshes", []), *doc.get("nodes", [])) if any(w != 0 for w in x.get("weights", []))]
+    if weighted:
+        raise MeshError(
+            f"{p}: morph targets (shape keys) with non-zero weights shape the mesh, and garsim reads the base mesh; "
+            "export the mesh with its shape keys applied"
+        )
+
+
+_BOM = b"\xef\xbb\xbf"
+
+
+def obj_bytes(data: bytes) -> bytes:
+    """An OBJ file's bytes as the readers take them: a UTF-8 byte-order mark dropped (else the first 'v' line is not
+    seen and every index shifts by one) and ``\\r\\n`` or old Mac ``\\r`` line ends made ``\\n``."""
+    if data.startswith(_BOM):
+        data = data[len(_BOM) :]
+    if b"\r" in data:
+        data = data.replace(b"\r\n", b"\n").replace(b"\r", b"\n")
+    return data
 
 
 def _check_obj_lines(p: Path, data: bytes) -> None:
@@ -323,6 +419,16 @@ def _check_obj_lines(p: Path, data: bytes) -> None:
                 f"(a '{kind.decode()}' line needs {need}); re-export the mesh"
             )
         raise MeshError(f"{p}: line {n} {shown!r} is malformed: a '{kind.decode()}' line needs {need}")
+
+
+def _check_obj_numbers(p: Path, data: bytes) -> None:
+    """Raise MeshError naming the first 'v' line whose coordinates are not numbers (e.g. decimal commas)."""
+    for match in _OBJ_V.finditer(data):  # only after a failed read: the loop ends at the first bad line
+        if not _numbers(list(match.groups())):
+            line = data[match.start() : data.find(b"\n", match.start()) % (len(data) + 1)]
+            shown = line.decode("utf-8", errors="replace").strip()[:60]
+            n = data.count(b"\n", 0, match.start()) + 1
+            raise MeshError(f"{p}: line {n} {shown!r} is malformed: a 'v' line needs 3 numbers (with decimal points)")
 
 
 @dataclass(frozen=True)
@@ -417,8 +523,7 @@ _OBJ_VALUES = {
 def _obj_plain_text(data: bytes) -> bytes:
     """OBJ text for the attribute patterns: ``\\n`` line ends only (the lines ``bytes.splitlines`` sees), comments
     removed, and a leading ``\\n`` so that every line starts after one (a literal the regex engine finds fast)."""
-    if b"\r" in data:
-        data = data.replace(b"\r\n", b"\n").replace(b"\r", b"\n")
+    data = obj_bytes(data)
     return b"\n" + (re.sub(rb"#[^\n]*", b"", data) if b"#" in data else data)
 
 
@@ -560,10 +665,12 @@ def _load(path: str | os.PathLike, y_up: bool, attributes: bool) -> tuple[np.nda
     kwargs: dict[str, Any] = {"process": False}
     plain, data = None, b""
     if ext == ".obj":
-        data = _read_file(p)
+        data = obj_bytes(_read_file(p))
         _check_obj_lines(p, data)
         kwargs.update(maintain_order=True, skip_materials=True)
         plain = _read_obj_fast(data)
+    elif ext in (".glb", ".gltf"):
+        _check_gltf(p)
     if plain is not None:
         loaded, (vertices, faces) = None, plain
         if faces.size and faces.max() >= len(vertices):
@@ -577,8 +684,11 @@ def _load(path: str | os.PathLike, y_up: bool, attributes: bool) -> tuple[np.nda
         try:
             with warnings.catch_warnings():  # trimesh's UV un-merging warns on faces without texture indices
                 warnings.simplefilter("ignore", RuntimeWarning)
-                loaded = trimesh.load(str(p), force="mesh", **kwargs)
+                source = (io.BytesIO(data), "obj") if ext == ".obj" else (str(p), None)  # OBJ: the normalised bytes
+                loaded = trimesh.load(source[0], file_type=source[1], force="mesh", **kwargs)
         except Exception as exc:  # noqa: BLE001 - trimesh raises many types on malformed files
+            if ext == ".obj":
+                _check_obj_numbers(p, data)
             detail = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
             if isinstance(exc, IndexError):
                 detail += " (faces reference vertices that do not exist)"
