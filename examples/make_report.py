@@ -176,7 +176,7 @@ def main() -> None:
             f"{fab['ordering_agreement']:.2f} over {fab['pairs_over_gap']} neighbouring pairs whose simulated values "
             f"differ by more than 2 mm / 2 deg; predicted / simulated spread {fab['spread_ratio']:.3f}; a fabric "
             f"midway between neighbouring presets (physical values) predicted between them in "
-            f"{fab['midway_between']:.0%} of the distance and fold checks. Per group: "
+            f"{fab['midway_between']:.1%} of the distance and fold checks. Per group: "
             f"`{fab_png.name}`."
         )
     if robustness:

@@ -847,8 +847,8 @@ def build_parser() -> argparse.ArgumentParser:
         required=True,
         nargs="+",
         metavar="TARGET",
-        help="target body mesh(es), same topology as --canonical; several files or a folder (its meshes sorted by "
-        "name) drape the garment on each, --out then being a folder",
+        help="target body mesh(es), same topology as --canonical; several files or a folder (its meshes in name "
+        "order, numbers by value: frame_2 before frame_10) drape the garment on each, --out then being a folder",
     )
     p.add_argument(
         "--garment",
@@ -902,7 +902,10 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument("--interpolate", type=int, metavar="N", help="resample the --poses keyframes to N frames (slerp)")
     p.add_argument("--canonical", help="canonical body mesh (with --targets)")
-    p.add_argument("--targets", help="folder of target body OBJs (sorted by name) or an .npz with 'vertices' (T, V, 3)")
+    p.add_argument(
+        "--targets",
+        help="folder of target body OBJs (in name order, numbers by value) or an .npz with 'vertices' (T, V, 3)",
+    )
     p.add_argument("--fabric", default="cotton", type=fabric_arg, help=FABRIC_HELP)
     p.add_argument(
         "--pinned",
