@@ -1,4 +1,5 @@
-"""examples/input_checks.py and examples/prior_gap.py run as scripts on the committed fixture."""
+"""examples/input_checks.py and examples/prior_gap.py run as scripts on the committed fixture; the body change of
+examples/shape_change.py."""
 
 from __future__ import annotations
 
@@ -37,3 +38,17 @@ def test_prior_gap_prints_a_row_per_family_with_the_two_priors_close():
     net_stored, net_api = (float(x) for x in nets.split("/"))
     assert int(n) == 13 and 10.0 < stored < 100.0 and abs(stored - api) < 0.5
     assert net_stored < stored and abs(net_stored - net_api) < 0.1 and float(gap.split("/")[0]) < 1.0
+
+
+def test_shape_change_moves_one_phenotype_value_towards_the_far_end():
+    """examples/shape_change.py: the changed body is the same person with one value moved by delta, away from the
+    nearer end of Anny's 0..1 range (a light body gets heavier, a heavy one lighter); the control changes nothing."""
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location("shape_change", ROOT / "examples" / "shape_change.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    body = {"weight": 0.2, "height": 0.9, "age": 0.5}
+    assert module.moved_phenotype(body, "weight", 0.3) == {**body, "weight": 0.5}
+    assert module.moved_phenotype(body, "height", 0.3) == {**body, "height": 0.6}
+    assert module.moved_phenotype(body, "control", 0.3) == body
