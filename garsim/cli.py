@@ -307,7 +307,8 @@ def cmd_drape(args: argparse.Namespace) -> int:
         # with --up y the result is already in the input's Y-up axis
         y_up = args.up == "z" and (args.y_up or path.suffix.lower() in (".glb", ".gltf"))
         attrs = None if attributes.empty else attributes.recompute_normals(verts, gf)
-        save_mesh(path, verts, gf, y_up=y_up, attributes=attrs)
+        axes = {"input_up": "y" if y_up or args.up == "y" else "z", "input_units": units}  # an OBJ's, for garsim view
+        save_mesh(path, verts, gf, y_up=y_up, attributes=attrs, metadata=axes)
         print(path)
         if png_path is not None:
             print(png_path)

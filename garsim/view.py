@@ -369,7 +369,7 @@ def load_usd(path: str | Path) -> ViewData:
 def _obj_axes(obj: Path, up: str | None, units: str | None) -> tuple[str, str]:
     """(up, units) of OBJ-based input: as given, else as the garsim metadata line of ``obj`` says (``input_up``,
     ``input_units``: what ``garsim animate`` wrote), else Z-up metres."""
-    from garsim.export import read_obj_metadata
+    from garsim.geometry.io import read_obj_metadata
 
     meta = read_obj_metadata(obj) if (up is None or units is None) and obj.is_file() else {}
     return up or str(meta.get("input_up", "z")), units or str(meta.get("input_units", "m"))

@@ -886,6 +886,7 @@ def test_drape_writes_glb_in_metres_and_obj_in_the_input_units(scene, tmp_path):
     Y up, as glTF requires (and `garsim animate` writes it)."""
     from garsim import GarSim
     from garsim.geometry.io import load_mesh
+    from garsim.view import load_view_data
 
     folder, meshes = scene
     for name in "ctg":
@@ -897,3 +898,5 @@ def test_drape_writes_glb_in_metres_and_obj_in_the_input_units(scene, tmp_path):
         assert main([*argv, "--out", str(tmp_path / f"out{ext}")]) == 0
         got = load_mesh(tmp_path / f"out{ext}", y_up=ext == ".glb")[0]
         np.testing.assert_allclose(got, metres * scale, atol=1e-4 * scale)
+        # garsim view places either in metres, Z up: the OBJ says its unit in garsim's metadata line
+        np.testing.assert_allclose(load_view_data(tmp_path / f"out{ext}").frames[0], metres, atol=1e-5)

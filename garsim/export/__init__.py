@@ -33,7 +33,6 @@ from garsim.export.gltf import GLTF_EXTENSIONS, write_gltf_animation
 from garsim.export.pc2 import (
     PC2_EXTENSIONS,
     pc2_files,
-    read_obj_metadata,
     read_pc2,
     write_obj,
     write_obj_sequence,
@@ -51,7 +50,6 @@ __all__ = [
     "SUPPORTED_EXTENSIONS",
     "animation_files",
     "export_animation",
-    "read_obj_metadata",
     "read_pc2",
     "write_gltf_animation",
     "write_obj",

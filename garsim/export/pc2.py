@@ -15,8 +15,6 @@ comment line ``# garsim {...json...}`` after the ``# garsim export`` header; OBJ
 
 from __future__ import annotations
 
-import itertools
-import json
 import os
 import struct
 from collections.abc import Mapping
@@ -35,7 +33,7 @@ from garsim.export._common import (
     check_writable_folder,
     metadata_json,
 )
-from garsim.geometry.io import MeshAttributes, obj_text
+from garsim.geometry.io import OBJ_METADATA_PREFIX, MeshAttributes, obj_text
 
 PC2_MAGIC = b"POINTCACHE2\0"
 PC2_HEADER = struct.Struct("<12siiffi")  # 32 bytes
@@ -124,23 +122,6 @@ def read_pc2(path: str | os.PathLike) -> tuple[np.ndarray, float, float]:
         )
     frames = np.frombuffer(data, dtype="<f4", offset=PC2_HEADER.size).reshape(num_samples, num_points, 3)
     return frames.astype(np.float32), float(start), float(rate)
-
-
-OBJ_METADATA_PREFIX = "# garsim "
-
-
-def read_obj_metadata(path: str | os.PathLike) -> dict[str, Any]:
-    """The ``# garsim {json}`` metadata line of an OBJ written by garsim (``{}`` when the file has none)."""
-    prefix = OBJ_METADATA_PREFIX.encode() + b"{"
-    with open(path, "rb") as f:
-        for line in itertools.islice(f, 4):  # the header's comment lines come first
-            if line.startswith(prefix):
-                try:
-                    meta = json.loads(line[len(prefix) - 1 :])
-                except ValueError:
-                    return {}
-                return meta if isinstance(meta, dict) else {}
-    return {}
 
 
 def _frame_obj(a: Animation, k: int) -> bytes:

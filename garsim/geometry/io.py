@@ -796,6 +796,23 @@ def obj_text(
     return buf.getvalue().encode("ascii")
 
 
+OBJ_METADATA_PREFIX = "# garsim "
+
+
+def read_obj_metadata(path: str | os.PathLike) -> dict[str, Any]:
+    """The ``# garsim {json}`` metadata line of an OBJ written by garsim (``{}`` when the file has none)."""
+    prefix = OBJ_METADATA_PREFIX.encode() + b"{"
+    with open(path, "rb") as f:
+        for line in itertools.islice(f, 4):  # the header's comment lines come first
+            if line.startswith(prefix):
+                try:
+                    meta = json.loads(line[len(prefix) - 1 :])
+                except ValueError:
+                    return {}
+                return meta if isinstance(meta, dict) else {}
+    return {}
+
+
 def save_mesh(
     path: str | os.PathLike,
     vertices: np.ndarray,
@@ -803,6 +820,7 @@ def save_mesh(
     vertex_colors: np.ndarray | None = None,
     y_up: bool = False,
     attributes: MeshAttributes | None = None,
+    metadata: dict[str, Any] | None = None,
 ) -> Path:
     """Write a validated mesh atomically (temp file + rename) in vertex order; returns the path.
 
@@ -810,7 +828,8 @@ def save_mesh(
     the attributes' normals). ``attributes`` (:class:`MeshAttributes`, e.g. from :func:`load_mesh_with_attributes`):
     OBJ gets the same UV and normal lists and corner indices; GLB and PLY get per-vertex UVs when the UVs have no
     seams (with seams a warning says to write OBJ) and vertex colours, if given, take their place; OFF and STL
-    have no UVs.
+    have no UVs. ``metadata`` (OBJ only): a JSON dict written as the comment line ``# garsim {json}``
+    (:func:`read_obj_metadata`; e.g. the axis and units the vertices are in, which ``garsim view`` reads).
     """
     p, ext = _check_path(path, writing=True)
     v, f = validate_mesh(vertices, faces, name=str(p))
@@ -820,7 +839,8 @@ def save_mesh(
         v = z_up_to_y_up(v)
         attrs = attrs.rotated(z_up_to_y_up) if attrs is not None else None
     if ext == ".obj":
-        return atomic_write_bytes(p, obj_text(v, f, attrs, colors))
+        header = "garsim" if not metadata else "garsim\n" + OBJ_METADATA_PREFIX + json.dumps(metadata, allow_nan=False)
+        return atomic_write_bytes(p, obj_text(v, f, attrs, colors, header=header))
     import trimesh
 
     mesh = trimesh.Trimesh(vertices=v.astype(np.float64), faces=f, process=False, validate=False)
