@@ -9,6 +9,7 @@ same two segments without a change of shape: its states are what the shape rows 
 (``stored_truth_vs_pose_state_mm``: how far its pose state lies from the stored ground truth, which was simulated in
 one motion, at full resolution, with the pins skinned by the known pose). ``--resolution low`` simulates the stored
 low-resolution mesh (~4x faster). Pinned vertices follow the API's prior in the simulation and in every drape.
+``prior_rigfree`` is the API's rig-free prior (what a body in another vertex order or topology gets).
 
 Rows are appended to ``--out`` (JSON lines) as they finish; a rerun skips the rows already there.
 
@@ -96,6 +97,50 @@ def simulate(s, body: AnnyBody, target_pose: dict, sim_cfg: SimConfig, frames: i
     return states[0][0].astype(np.float64), states[1][0].astype(np.float64), canonical, motion[-1]
 
 
+METHODS = ("template", "prior", "prior_rigfree", "raw", "defaults")
+
+
+def summary(rows: list[dict]) -> str:
+    """Markdown tables of the rows: mean error (mm) of each method per change and case, and per family."""
+    lines = []
+    for case in ("shape", "shape_pose"):
+        lines += [
+            f"**{case}** (mean error against the simulation, mm; samples with every change simulated)",
+            "",
+            "| change | n | " + " | ".join(METHODS) + " | raw / prior | defaults / prior |",
+            "|---|---|" + "---|" * (len(METHODS) + 2),
+        ]
+        done = defaultdict(set)
+        for r in rows:
+            if "rejected" not in r:
+                done[r["sample"]].add(r["change"])
+        complete = {name for name, changes in done.items() if changes >= set(CHANGES)}
+        for change in CHANGES:
+            sel = [r for r in rows if r["change"] == change and r["sample"] in complete]
+            if not sel:
+                continue
+            keys = {m: f"{case}/{m}_mm" for m in METHODS}  # a method is shown where every row has it
+            mean = {m: np.mean([r[k] for r in sel]) if all(k in r for r in sel) else np.nan for m, k in keys.items()}
+            cells = " | ".join("-" if np.isnan(mean[m]) else f"{mean[m]:.1f}" for m in METHODS)
+            lines.append(
+                f"| {change} | {len(sel)} | {cells} | {mean['raw'] / mean['prior']:.2f} | "
+                f"{mean['defaults'] / mean['prior']:.2f} |"
+            )
+        lines.append("")
+    lines += ["| sample | family | change | " + " | ".join(f"{m} (shape / pose)" for m in METHODS) + " |"]
+    lines += ["|---|---|---|" + "---|" * len(METHODS)]
+    for r in rows:
+        if "rejected" in r:
+            lines.append(f"| {r['sample']} | {r['family']} | {r['change']} | rejected: {r['rejected']} |")
+            continue
+        cells = " | ".join(
+            " / ".join(f"{r[k]:.1f}" if k in r else "-" for k in (f"shape/{m}_mm", f"shape_pose/{m}_mm"))
+            for m in METHODS
+        )
+        lines.append(f"| {r['sample']} | {r['family']} | {r['change']} | {cells} |")
+    return "\n".join(lines)
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--data", required=True, help="a garsim dataset folder with a test split")
@@ -107,7 +152,11 @@ def main() -> None:
     )
     parser.add_argument("--model", default=None, help="model folder (default: the shipped model)")
     parser.add_argument("--out", required=True, help="JSON lines file (appended; rows already there are skipped)")
+    parser.add_argument("--summary", action="store_true", help="print the tables of the rows in --out and stop")
     args = parser.parse_args()
+    if args.summary:
+        print(summary([json.loads(line) for line in Path(args.out).read_text().splitlines()]))
+        return
 
     config_file = Path(args.data) / CONFIG_FILE  # the generator's settings (a committed fixture has none: defaults)
     settings = json.loads(config_file.read_text()) if config_file.exists() else {}
@@ -141,15 +190,15 @@ def main() -> None:
             except SimulationRejected as exc:
                 row["rejected"] = f"{exc.reason}: {exc.detail.splitlines()[0]}"
             else:
+                # the bodies in another vertex order get the API's rig-free prior (Anny's order: the recovered bones)
+                order = np.random.default_rng(0).permutation(len(s.body_canonical))
+                reordered = np.argsort(order)[s.body_faces]
                 for case, body, truth in (("shape", canonical, shape_gt), ("shape_pose", target, pose_gt)):
-                    for method, sim in methods.items():
-                        pred = sim.drape(
-                            (s.body_canonical, s.body_faces),
-                            (body, s.body_faces),
-                            (s.garment, s.garment_faces),
-                            fabric=user_fabric,
-                            pinned=s.pinned,
-                        )
+                    for method, sim in (*methods.items(), ("prior_rigfree", methods["prior"])):
+                        bodies = ((s.body_canonical, s.body_faces), (body, s.body_faces))
+                        if method == "prior_rigfree":
+                            bodies = ((s.body_canonical[order], reordered), (body[order], reordered))
+                        pred = sim.drape(*bodies, (s.garment, s.garment_faces), fabric=user_fabric, pinned=s.pinned)
                         row[f"{case}/{method}_mm"] = round(mean_error_mm(pred, truth), 3)
                         row[f"{case}/{method}_inside_pct"] = round(
                             100.0 * float(inside_mask(pred, body, s.body_faces).mean()), 3
