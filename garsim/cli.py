@@ -334,13 +334,23 @@ def _read_pinned(path: str) -> object:
     return values.astype(np.int64)
 
 
-def _load_targets(src: Path, faces: object) -> list:
-    """Target body vertex arrays from a folder of OBJs or an .npz with 'vertices' (T, V, 3); every body must have
-    the canonical body's topology."""
+def _load_targets(src: Path, faces: object, fps: float, animation: str | None) -> list:
+    """Target body vertex arrays from a folder of OBJs, an .npz with 'vertices' (T, V, 3) or an animated glTF
+    sampled at ``fps``; every body must have the canonical body's topology."""
     import numpy as np
 
-    from garsim.geometry.io import MeshError, load_mesh, natural_order
+    from garsim.geometry.io import MeshError, load_mesh, load_mesh_animation, natural_order
 
+    if animation is not None and src.suffix.lower() not in (".glb", ".gltf"):
+        raise ValueError(f"--animation picks an animation of a .glb/.gltf --targets file, not of {src}")
+    if src.suffix.lower() in (".glb", ".gltf") and src.is_file():
+        frames, f = load_mesh_animation(src, fps, animation)
+        if f.shape != faces.shape or not np.array_equal(f, faces):
+            raise MeshError(
+                f"{src}: {frames.shape[1]} vertices, {len(f)} faces: the animated body must have the canonical body's "
+                f"topology ({len(faces)} faces); give --canonical the same file (read in the pose it is stored in)"
+            )
+        return list(frames)
     if src.is_dir():
         files = natural_order(src.glob("*.obj"))  # frame_2 before frame_10
         if not files:
@@ -358,7 +368,9 @@ def _load_targets(src: Path, faces: object) -> list:
     if not src.is_file():
         raise ValueError(f"--targets {src}: no such file or folder")
     if src.suffix.lower() != ".npz":
-        raise ValueError(f"--targets {src}: give a folder of body OBJs or an .npz with 'vertices' (T, V, 3)")
+        raise ValueError(
+            f"--targets {src}: give a folder of body OBJs, an .npz with 'vertices' (T, V, 3) or an animated .glb/.gltf"
+        )
     try:
         with np.load(src, allow_pickle=False) as z:
             if "vertices" not in z.files:
@@ -386,7 +398,7 @@ def cmd_animate(args: argparse.Namespace) -> int:
     if not sources or (sources == ["--canonical with --targets"] and not (args.canonical and args.targets)):
         raise ValueError(
             "give one of --motion NAME or --poses FILE (the default Anny body), or --canonical and --targets (a "
-            "folder of body OBJs or an .npz with an array 'vertices' of shape (T, V, 3))"
+            "folder of body OBJs, an .npz with an array 'vertices' of shape (T, V, 3), or an animated .glb/.gltf)"
         )
     if args.frames is not None and not args.motion:
         raise ValueError("--frames sets the length of a --motion; --poses and --targets give their own frames")
@@ -395,6 +407,10 @@ def cmd_animate(args: argparse.Namespace) -> int:
         raise ValueError(f"--frames must be >= 2, got {frames}")
     if args.fps <= 0:
         raise ValueError(f"--fps must be > 0, got {args.fps}")
+    if args.animation is not None and not args.targets:
+        raise ValueError(
+            "--animation picks an animation of a .glb/.gltf --targets file; give --canonical and --targets"
+        )
     if args.interpolate is not None and (not args.poses or args.interpolate < 2):
         raise ValueError("--interpolate N (N >= 2) resamples the keyframes of --poses FILE")
     import numpy as np
@@ -448,7 +464,7 @@ def cmd_animate(args: argparse.Namespace) -> int:
     else:
         canonical = load_mesh(args.canonical)
         faces = canonical[1]
-        targets = _load_targets(Path(args.targets), faces)
+        targets = _load_targets(Path(args.targets), faces, args.fps, args.animation)
     sim = GarSim.prior_only() if args.prior_only else GarSim.pretrained()
     frames = sim.drape_sequence(
         canonical,
@@ -902,10 +918,19 @@ def build_parser() -> argparse.ArgumentParser:
         ".npz of one (T, 3)/(T, 3, 3)/(T, 4, 4) array per bone or (T,) per joint angle",
     )
     p.add_argument("--interpolate", type=int, metavar="N", help="resample the --poses keyframes to N frames (slerp)")
-    p.add_argument("--canonical", help="canonical body mesh (with --targets)")
+    p.add_argument(
+        "--canonical",
+        help="canonical body mesh (with --targets); a skinned .glb/.gltf is read in the pose it is stored in, so "
+        "the animated --targets file itself can be its canonical body",
+    )
     p.add_argument(
         "--targets",
-        help="folder of target body OBJs (in name order, numbers by value) or an .npz with 'vertices' (T, V, 3)",
+        help="folder of target body OBJs (in name order, numbers by value), an .npz with 'vertices' (T, V, 3), or "
+        "a .glb/.gltf whose body is animated (skin, shape keys or node motion; sampled at --fps from its first to "
+        "its last key)",
+    )
+    p.add_argument(
+        "--animation", help="which animation of a .glb/.gltf --targets file, by name or index (default: the first)"
     )
     p.add_argument("--fabric", default="cotton", type=fabric_arg, help=FABRIC_HELP)
     p.add_argument(
@@ -926,7 +951,12 @@ def build_parser() -> argparse.ArgumentParser:
         default="m",
         help="length unit of the input meshes and of the PC2/OBJ output (USD declares it; glTF is always metres)",
     )
-    p.add_argument("--fps", type=float, default=30.0, help="frames per second of the animation")
+    p.add_argument(
+        "--fps",
+        type=float,
+        default=30.0,
+        help="frames per second of the animation (a .glb/.gltf --targets animation is sampled at this rate)",
+    )
     p.add_argument("--out", required=True, help=f"output file ({', '.join(ANIMATION_OUTPUTS)})")
     p.add_argument("--prior-only", action="store_true", help="use the skinning prior, not the model")
     _config_default(

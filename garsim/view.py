@@ -1,14 +1,14 @@
 """``garsim view``: an interactive browser viewer (viser) for drapes and animations.
 
-Reads a ``.glb``/``.gltf`` written by :mod:`garsim.export` (frames rebuilt from the morph targets, placed by the
-node transforms), a USD stage (``.usd``/``.usda``/``.usdc``: time-sampled points, through the prims' transforms, in
-its declared axis and unit), an ``.npz`` with ``frames`` (T, N, 3) and ``faces`` (optional ``body_frames`` (T, Vb, 3)
-or (Vb, 3), ``body_faces``, ``prior_frames`` (T, N, 3), ``fps``), a ``.pc2`` (+ the OBJ beside it, and
-``<stem>_body.pc2``), one mesh file, or a folder of OBJs (one sequence in name order, numbers by value; files whose
-name contains ``body`` / ``prior`` are the body / the prior); a .pc2 or OBJ in the ``up`` axis and ``units`` given,
-else as garsim's metadata line in the OBJ says, else Z-up metres. The page has a frame slider with play, body and
-garment toggles and, when a prior is present, a prior-vs-prediction toggle and the correction
-``|prediction - prior|`` as vertex colour.
+Reads a ``.glb``/``.gltf`` (garsim.export's animations frame by frame, or any glTF scene sampled over its first
+animation: node transforms, skins and morph targets applied, :mod:`garsim.geometry.gltf_scene`), a USD stage
+(``.usd``/``.usda``/``.usdc``: time-sampled points, through the prims' transforms, in its declared axis and unit), an
+``.npz`` with ``frames`` (T, N, 3) and ``faces`` (optional ``body_frames`` (T, Vb, 3) or (Vb, 3), ``body_faces``,
+``prior_frames`` (T, N, 3), ``fps``), a ``.pc2`` (+ the OBJ beside it, and ``<stem>_body.pc2``), one mesh file, or a
+folder of OBJs (one sequence in name order, numbers by value; files whose name contains ``body`` / ``prior`` are the
+body / the prior); a .pc2 or OBJ in the ``up`` axis and ``units`` given, else as garsim's metadata line in the OBJ
+says, else Z-up metres. The page has a frame slider with play, body and garment toggles and, when a prior is present,
+a prior-vs-prediction toggle and the correction ``|prediction - prior|`` as vertex colour.
 
 viser is an optional extra (``pip install 'garsim[view]'``), imported only by :func:`serve`.
 """
@@ -117,99 +117,33 @@ def _faces(faces: Any, n: int, what: str) -> np.ndarray:
 # ----------------------------------------------------------------------------- readers
 
 
-_COMPONENTS = {5126: "<f4", 5125: "<u4", 5123: "<u2", 5121: "u1"}
-_WIDTHS = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4}
-
-
-def _accessor(doc: dict, blob: bytes, index: int) -> np.ndarray:
-    acc = doc["accessors"][index]
-    dtype = np.dtype(_COMPONENTS[acc["componentType"]])
-    width = _WIDTHS[acc["type"]]
-    count = int(acc["count"])
-    if "bufferView" not in acc:  # all zeros (sparse accessors are not used by garsim)
-        return np.zeros((count, width) if width > 1 else count, dtype=dtype)
-    view = doc["bufferViews"][acc["bufferView"]]
-    offset = view.get("byteOffset", 0) + acc.get("byteOffset", 0)
-    stride = view.get("byteStride", dtype.itemsize * width)
-    rows = np.ndarray((count, width), dtype=dtype, buffer=blob, offset=offset, strides=(stride, dtype.itemsize))
-    rows = np.array(rows)
-    return rows if width > 1 else rows[:, 0]
-
-
-def _gltf_mesh_frames(doc: dict, blob: bytes, mesh: dict) -> tuple[np.ndarray, np.ndarray]:
-    """(frames (T, V, 3), faces) of a mesh's first primitive: base POSITION + each morph target."""
-    prim = mesh["primitives"][0]
-    base = _accessor(doc, blob, prim["attributes"]["POSITION"]).astype(np.float64)
-    if "indices" in prim:
-        faces = _accessor(doc, blob, prim["indices"]).reshape(-1, 3)
-    else:
-        faces = np.arange(len(base)).reshape(-1, 3)
-    targets = prim.get("targets") or []
-    if targets:
-        frames = np.stack([base + _accessor(doc, blob, t["POSITION"]) for t in targets if "POSITION" in t])
-    else:
-        frames = base[None]
-    return frames.astype(np.float32), faces.astype(np.int64)
-
-
-def _z_up(points: np.ndarray) -> np.ndarray:
-    """glTF Y up -> Z up: (x, y, z) -> (x, -z, y), the inverse of garsim.export's rotation."""
-    return np.stack([points[..., 0], -points[..., 2], points[..., 1]], axis=-1)
-
-
-def _gltf_mesh_matrices(doc: dict) -> dict[int, np.ndarray]:
-    """Mesh index -> the 4x4 world matrix of the first node of the default scene that shows it (node matrices or
-    translation / rotation / scale, parents first)."""
-    from scipy.spatial.transform import Rotation
-
-    nodes = doc.get("nodes") or []
-    scenes = doc.get("scenes") or [{"nodes": list(range(len(nodes)))}]
-    out: dict[int, np.ndarray] = {}
-
-    def local(node: dict) -> np.ndarray:
-        if "matrix" in node:
-            return np.asarray(node["matrix"], dtype=np.float64).reshape(4, 4).T  # stored column by column
-        m = np.eye(4)
-        rotation = Rotation.from_quat(node.get("rotation", [0.0, 0.0, 0.0, 1.0])).as_matrix()  # (x, y, z, w)
-        m[:3, :3] = rotation * np.asarray(node.get("scale", [1.0, 1.0, 1.0]), dtype=np.float64)
-        m[:3, 3] = node.get("translation", [0.0, 0.0, 0.0])
-        return m
-
-    stack = [(i, np.eye(4)) for i in reversed(scenes[int(doc.get("scene", 0))].get("nodes", []))]
-    while stack:
-        i, parent = stack.pop()
-        world = parent @ local(nodes[i])
-        if "mesh" in nodes[i]:
-            out.setdefault(int(nodes[i]["mesh"]), world)
-        stack.extend((c, world) for c in reversed(nodes[i].get("children", [])))
-    return out
-
-
 def load_gltf(path: str | Path) -> ViewData:
-    """A .glb/.gltf written by garsim.export (or any glTF whose meshes animate by morph targets)."""
-    p = Path(path)
-    from garsim.geometry.io import read_gltf_document
+    """A .glb/.gltf written by garsim.export, or any glTF scene: its meshes as they show (node transforms, skins,
+    morph targets), sampled over its first animation at the file's ``extras.fps`` (else 30); the mesh named like
+    ``body`` is the body, like ``prior`` the prior, the first other mesh the garment."""
+    from garsim.geometry.gltf_scene import GltfScene
+    from garsim.geometry.io import y_up_to_z_up
 
-    doc, blob = read_gltf_document(p)
-    meshes = doc.get("meshes") or []
-    if not meshes:
-        raise ValueError(f"{p}: the glTF holds no mesh")
-    roles: dict[str, dict] = {}
-    for m in meshes:
-        name = str(m.get("name", "")).lower()
-        role = "body" if "body" in name else "prior" if "prior" in name else "garment"
-        roles.setdefault(role, m)
+    p = Path(path)
+    scene = GltfScene.read(p)
+    roles: dict[str, Any] = {}
+    for inst in scene.instances:
+        name = inst.name.lower()
+        roles.setdefault("body" if "body" in name else "prior" if "prior" in name else "garment", inst)
     if "garment" not in roles:
-        roles["garment"] = meshes[0]
-    extras = doc.get("extras") or {}
-    y_up = str(extras.get("up", "Y")).upper() != "Z"
-    out: dict[str, Any] = {}
-    matrices = _gltf_mesh_matrices(doc)
-    for role, m in roles.items():
-        frames, faces = _gltf_mesh_frames(doc, blob, m)
-        world = matrices.get(next(i for i, x in enumerate(meshes) if x is m), np.eye(4))
-        frames = (frames @ world[:3, :3].T + world[:3, 3]).astype(np.float32)
-        out[role] = (_z_up(frames) if y_up else frames, faces)
+        roles["garment"] = scene.instances[0]
+    extras = scene.doc.get("extras") or {}
+    fps = float(extras.get("fps", 30.0))
+    if scene.animations:
+        verts = scene.frames(fps)
+    else:
+        verts = scene.vertices()[None]
+    if str(extras.get("up", "Y")).upper() != "Z":
+        verts = y_up_to_z_up(verts)
+    out: dict[str, tuple[np.ndarray, np.ndarray]] = {}
+    for role, inst in roles.items():
+        own = np.all((scene.faces >= inst.start) & (scene.faces < inst.stop), axis=1)
+        out[role] = verts[:, inst.start : inst.stop].astype(np.float32), scene.faces[own] - inst.start
     frames, faces = out["garment"]
     body = out.get("body")
     prior = out.get("prior")
@@ -219,7 +153,7 @@ def load_gltf(path: str | Path) -> ViewData:
         body_frames=None if body is None else body[0],
         body_faces=None if body is None else body[1],
         prior_frames=None if prior is None else prior[0],
-        fps=float(extras.get("fps", 30.0)),
+        fps=fps,
         name=p.name,
     )
 

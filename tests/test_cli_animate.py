@@ -220,3 +220,30 @@ def test_a_folder_of_unpadded_frames_plays_in_number_order_and_normals_face_as_g
         points = np.asarray(mesh.GetPointsAttr().Get(float(t)))
         normals = np.asarray(mesh.GetNormalsAttr().Get(float(t)))
         assert np.mean(np.sum(normals * vertex_normals(points, g.faces), axis=1) < 0) > 0.99
+
+
+def test_a_skinned_gltf_body_drives_animate_like_its_frames(case, tmp_path, capsys, anny_body):
+    """A glTF of the body skinned by Anny's own bones and weights (the T-pose stored, the walk animated), given as
+    both --canonical and --targets, drapes like the same frames from an .npz; a wrong --animation is named."""
+    from gltf_builder import skinned_body
+
+    from garsim.bodies.poses import batched_matrices, motion, stack_poses
+    from garsim.export import read_pc2
+
+    folder, g, canonical, bodies, faces = case
+    walk = anny_body.pose_batch(batched_matrices(stack_poses(motion("walk", 3))))[1]
+    tpose = anny_body.pose_batch(batched_matrices(stack_poses([anny_body.t_pose()])))[1][0]
+    rig = (anny_body.rest_vertices, faces, anny_body.skin_weights, anny_body.skin_indices, tpose, walk)
+    glb = skinned_body(tmp_path / "walk.glb", *rig, fps=24)
+    base = ["animate", "--garment", str(folder / "skirt.obj"), "--smoothing", "0", "--quiet", "--fps", "24"]
+    assert main([*base, "--canonical", str(glb), "--targets", str(glb), "--out", str(tmp_path / "a.pc2")]) == 0
+    npz = ["--canonical", str(folder / "canonical.obj"), "--targets", str(folder / "bodies.npz")]
+    assert main([*base, *npz, "--out", str(tmp_path / "b.pc2")]) == 0
+    np.testing.assert_allclose(read_pc2(tmp_path / "a_body.pc2")[0], bodies, atol=1e-5)
+    a, b = read_pc2(tmp_path / "a.pc2")[0], read_pc2(tmp_path / "b.pc2")[0]
+    assert a.shape == (3, len(g.vertices), 3)
+    np.testing.assert_allclose(a, b, atol=1e-4)
+    argv = [*base, "--canonical", str(glb), "--targets", str(glb), "--animation", "run", "--prior-only"]
+    assert main([*argv, "--out", str(tmp_path / "c.pc2")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "no animation 'run'; it has 'move'" in err[0]

@@ -1,5 +1,6 @@
 """Triangle-mesh I/O that preserves vertex order, with validation: OBJ read and written here (vectorised, no
-trimesh import: a cold ``garsim drape`` is faster by its ~0.5 s), the other formats through trimesh.
+trimesh import: a cold ``garsim drape`` is faster by its ~0.5 s), glTF read by :mod:`garsim.geometry.gltf_scene`, the
+other formats through trimesh.
 
 Every mesh that enters garsim goes through :func:`validate_mesh`, which either returns clean
 ``float32 (V, 3)`` vertices and ``int64 (F, 3)`` faces or raises a one-line :class:`MeshError`
@@ -14,7 +15,8 @@ Repairs (documented, silent): polygons with more than three corners are triangul
 Vertex order: OBJ vertices are kept in file order; other files are read with ``process=False`` (no merging, no
 reordering); an OBJ the vectorised reader cannot take (odd tokens) goes to trimesh with ``maintain_order=True``.
 Relative (negative) indices, a UTF-8 byte-order mark and ``\\r`` line ends read as in a plain file (``obj_bytes``). A
-glTF whose stored mesh is not the shape it shows (a skin, weighted morph targets, compressed geometry) is refused.
+glTF is read as it shows, by :mod:`garsim.geometry.gltf_scene` (node transforms, skins and morph-target weights
+applied; its meshes in depth-first node order); :func:`load_mesh_animation` samples its animation.
 STL stores a triangle soup without shared vertices; it is merged on load (the order is then the order of first
 appearance) and cannot round-trip vertex order.
 
@@ -37,7 +39,6 @@ import json
 import logging
 import os
 import re
-import struct
 import sys
 import warnings
 from collections.abc import Iterable
@@ -49,6 +50,7 @@ import numpy as np
 
 from garsim.atomic import atomic_write_bytes
 from garsim.geometry.cache import ContentCache, content_key
+from garsim.geometry.gltf_scene import GltfError, GltfScene
 from garsim.geometry.mesh import face_areas
 
 log = logging.getLogger(__name__)
@@ -314,69 +316,6 @@ def natural_order(paths: Iterable[Path]) -> list[Path]:
         return [(1, int(t)) if t.isdigit() else (0, t.lower()) for t in re.split(r"(\d+)", p.name)], p.name
 
     return sorted(paths, key=key)
-
-
-def read_gltf_document(path: Path, buffer: bool = True) -> tuple[dict, bytes]:
-    """(the JSON document, the binary buffer) of a .glb, or of a .gltf whose buffer is embedded (base64);
-    ``buffer=False``: the document alone (any .gltf). Raises ValueError for a file that is not one."""
-    data = path.read_bytes()
-    if path.suffix.lower() == ".gltf":
-        import base64
-
-        try:
-            doc = json.loads(data)
-        except ValueError as exc:
-            raise ValueError(f"{path}: not a glTF document ({_first_line(exc)})") from None
-        if not buffer or not doc.get("buffers"):
-            return doc, b""
-        uri = doc["buffers"][0].get("uri", "")
-        if not uri.startswith("data:"):
-            raise ValueError(f"{path}: only .gltf files with an embedded (base64) buffer are supported")
-        return doc, base64.b64decode(uri.split(",", 1)[1])
-    if len(data) < 20:
-        raise ValueError(f"{path}: not a GLB file (too short)")
-    magic, version, total = struct.unpack_from("<III", data, 0)
-    if magic != 0x46546C67 or version != 2:
-        raise ValueError(f"{path}: not a glTF 2.0 binary (.glb)")
-    if total > len(data):
-        raise ValueError(f"{path}: truncated GLB ({len(data)} of {total} bytes)")
-    json_len, _ = struct.unpack_from("<II", data, 12)
-    try:
-        doc = json.loads(data[20 : 20 + json_len])
-    except ValueError as exc:
-        raise ValueError(f"{path}: the GLB's JSON chunk does not parse ({_first_line(exc)})") from None
-    blob = b""
-    if buffer and 28 + json_len <= len(data):
-        bin_len, _ = struct.unpack_from("<II", data, 20 + json_len)
-        blob = data[28 + json_len : 28 + json_len + bin_len]
-    return doc, blob
-
-
-def _check_gltf(p: Path) -> None:
-    """Refuse a glTF whose stored geometry is not the shape it shows, which the mesh reader would take silently:
-    compressed geometry (a required extension), a skin (an armature poses the bind-pose mesh) or morph targets
-    with non-zero weights."""
-    try:
-        doc, _ = read_gltf_document(p, buffer=False)
-    except (OSError, ValueError) as exc:
-        raise MeshError(f"{p}: could not parse the {p.suffix.lower()} file: {_first_line(exc)}") from None
-    required = doc.get("extensionsRequired") or []
-    if required:
-        raise MeshError(
-            f"{p}: the file needs {', '.join(map(str, required))} (compressed geometry), which garsim cannot read; "
-            "export it without compression"
-        )
-    if doc.get("skins"):
-        raise MeshError(
-            f"{p}: the mesh is skinned (an armature poses it), and the file stores it in its bind pose; export the "
-            "posed mesh with the armature applied (no skin)"
-        )
-    weighted = [x for x in (*doc.get("meshes", []), *doc.get("nodes", [])) if any(w != 0 for w in x.get("weights", []))]
-    if weighted:
-        raise MeshError(
-            f"{p}: morph targets (shape keys) with non-zero weights shape the mesh, and garsim reads the base mesh; "
-            "export the mesh with its shape keys applied"
-        )
 
 
 _BOM = b"\xef\xbb\xbf"
@@ -670,7 +609,8 @@ def _load(path: str | os.PathLike, y_up: bool, attributes: bool) -> tuple[np.nda
         kwargs.update(maintain_order=True, skip_materials=True)
         plain = _read_obj_fast(data)
     elif ext in (".glb", ".gltf"):
-        _check_gltf(p)
+        scene = _gltf_scene(p)
+        plain = scene.vertices(), scene.faces
     if plain is not None:
         loaded, (vertices, faces) = None, plain
         if faces.size and faces.max() >= len(vertices):
@@ -712,6 +652,10 @@ def _load(path: str | os.PathLike, y_up: bool, attributes: bool) -> tuple[np.nda
     attrs = MeshAttributes()
     if attributes and ext == ".obj":
         attrs = _read_obj_attributes(data, p, f)
+    elif attributes and ext in (".glb", ".gltf"):
+        if scene.uvs is not None:
+            uv = scene.uvs.astype(np.float64) * [1.0, -1.0] + [0.0, 1.0]  # glTF's v runs down the image, OBJ's up
+            attrs = MeshAttributes(uvs=uv, uv_faces=f.copy())
     elif attributes and ext != ".stl":
         uv = getattr(getattr(loaded, "visual", None), "uv", None)
         if uv is not None and np.shape(uv) == (len(v), 2) and np.isfinite(uv).all():
@@ -720,6 +664,41 @@ def _load(path: str | os.PathLike, y_up: bool, attributes: bool) -> tuple[np.nda
         v = y_up_to_z_up(v)
         attrs = attrs.rotated(y_up_to_z_up)
     return v, f, attrs
+
+
+def _gltf_scene(p: Path) -> GltfScene:
+    try:
+        return GltfScene.read(p)
+    except GltfError as exc:  # its message names the file
+        raise MeshError(_first_line(exc)) from None
+    except OSError as exc:
+        raise MeshError(f"{p}: cannot read the file ({_first_line(exc)})") from None
+
+
+def load_mesh_animation(
+    path: str | os.PathLike, fps: float, animation: int | str | None = None, y_up: bool = False
+) -> tuple[np.ndarray, np.ndarray]:
+    """An animated glTF (skin, morph-target weights or node motion) sampled at ``fps`` from its first to its last
+    key -> (float32 frames (T, V, 3), faces), the vertices in :func:`load_mesh`'s order. ``animation``: index or name
+    (default the first); a file without animation gives its one rest frame."""
+    p, ext = _check_path(path, writing=False)
+    if ext not in (".glb", ".gltf"):
+        raise MeshError(f"{p}: an animated body is read from .glb or .gltf (a folder of OBJs for other formats)")
+    scene = _gltf_scene(p)
+    try:
+        if scene.animations:
+            frames = scene.frames(fps, animation)
+        elif animation is not None:
+            scene.animation_index(animation)  # raises: no animation
+        else:
+            frames = scene.vertices()[None]
+    except ValueError as exc:
+        raise MeshError(_first_line(exc)) from None
+    _, faces = validate_mesh(frames[0], scene.faces, name=str(p))
+    if not np.isfinite(frames).all():
+        raise MeshError(f"{p}: the animation gives non-finite vertex positions (broken keys or matrices)")
+    frames = frames.astype(np.float32)
+    return (y_up_to_z_up(frames) if y_up else frames), faces
 
 
 def load_mesh(path: str | os.PathLike, y_up: bool = False) -> tuple[np.ndarray, np.ndarray]:
