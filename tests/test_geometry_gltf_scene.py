@@ -230,3 +230,26 @@ def test_uvs_come_back_in_obj_convention_and_bad_files_are_named(tmp_path):
     p.write_text(json.dumps(doc))
     with pytest.raises(GltfError, match="past the end of its buffer"):
         GltfScene.read(p)
+
+
+def test_interleaved_sparse_and_strip_primitives(tmp_path):
+    """Positions interleaved with normals (byteStride 24), a sparse morph target (two of four vertices moved) and a
+    triangle strip: read as the specification lays them out."""
+    d = Doc()
+    pos = np.array([[0.0, 0, 0], [1, 0, 0], [0, 1, 0], [1, 1, 0]])
+    interleaved = np.concatenate([pos, np.tile([0.0, 0, 1], (4, 1))], axis=1).astype("<f4").tobytes()
+    d.doc["bufferViews"].append({"buffer": 0, "byteOffset": len(d.blob), "byteLength": 96, "byteStride": 24})
+    d.blob += interleaved
+    view = len(d.doc["bufferViews"]) - 1
+    d.doc["accessors"].append({"bufferView": view, "componentType": 5126, "count": 4, "type": "VEC3"})
+    position = len(d.doc["accessors"]) - 1
+    rows, values = d.add(np.array([1, 3]), 5125), d.add(np.array([[0.0, 0, 2], [0, 0, 4]]))
+    sparse = {"count": 2, "indices": {"bufferView": d.doc["accessors"][rows]["bufferView"], "componentType": 5125}}
+    sparse["values"] = {"bufferView": d.doc["accessors"][values]["bufferView"]}
+    d.doc["accessors"].append({"componentType": 5126, "count": 4, "type": "VEC3", "sparse": sparse})
+    target = len(d.doc["accessors"]) - 1
+    prim = {"attributes": {"POSITION": position}, "mode": 5, "targets": [{"POSITION": target}]}
+    d.doc["meshes"].append({"primitives": [prim], "weights": [0.5]})
+    scene = GltfScene.read(d.write(tmp_path / "strip.glb", [d.node(mesh=0)]))
+    np.testing.assert_array_equal(scene.faces, [[0, 1, 2], [1, 3, 2]])  # the second triangle flipped back
+    np.testing.assert_allclose(scene.vertices(), pos + [[0, 0, 0], [0, 0, 1], [0, 0, 0], [0, 0, 2]], atol=1e-6)
