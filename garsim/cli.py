@@ -334,21 +334,40 @@ def _read_pinned(path: str) -> object:
     return values.astype(np.int64)
 
 
-def _load_targets(src: Path, faces: object, fps: float, animation: str | None) -> list:
-    """Target body vertex arrays from a folder of OBJs, an .npz with 'vertices' (T, V, 3) or an animated glTF
-    sampled at ``fps``; every body must have the canonical body's topology."""
+def _load_targets(src: Path, faces: object, args: argparse.Namespace) -> list:
+    """Target body vertex arrays from a folder of OBJs, an .npz with 'vertices' (T, V, 3), an animated glTF
+    sampled at ``--fps``, a USD stage's animated body (its declared axis and unit brought to ``--up`` / ``--units``)
+    or a .pc2 point cache; every body must have the canonical body's topology."""
     import numpy as np
 
-    from garsim.geometry.io import MeshError, load_mesh, load_mesh_animation, natural_order
+    from garsim.geometry.io import MeshError, from_internal, load_mesh, load_mesh_animation, natural_order
+    from garsim.geometry.usd_stage import USD_EXTENSIONS
 
-    if animation is not None and src.suffix.lower() not in (".glb", ".gltf"):
-        raise ValueError(f"--animation picks an animation of a .glb/.gltf --targets file, not of {src}")
-    if src.suffix.lower() in (".glb", ".gltf") and src.is_file():
-        frames, f = load_mesh_animation(src, fps, animation)
+    ext = src.suffix.lower()
+    if args.animation is not None and ext not in (".glb", ".gltf", *USD_EXTENSIONS):
+        raise ValueError(f"--animation picks an animation of a .glb/.gltf or a mesh of a USD --targets file, not {src}")
+    if ext in (".glb", ".gltf", *USD_EXTENSIONS) and src.is_file():
+        if ext in USD_EXTENSIONS:
+            from garsim.geometry.usd_stage import load_usd_animation
+
+            frames, f, _ = load_usd_animation(src, args.animation)
+            frames = from_internal(frames, args.up, args.units)
+        else:
+            frames, f = load_mesh_animation(src, args.fps, args.animation)
         if f.shape != faces.shape or not np.array_equal(f, faces):
             raise MeshError(
                 f"{src}: {frames.shape[1]} vertices, {len(f)} faces: the animated body must have the canonical body's "
-                f"topology ({len(faces)} faces); give --canonical the same file (read in the pose it is stored in)"
+                f"topology ({len(faces)} faces) in the same vertex order"
+            )
+        return list(frames)
+    if ext == ".pc2" and src.is_file():
+        from garsim.export import read_pc2
+
+        frames = read_pc2(src)[0]
+        if frames.shape[1] != int(faces.max()) + 1:
+            raise MeshError(
+                f"{src}: {frames.shape[1]} points per frame, the canonical body has {int(faces.max()) + 1} vertices; "
+                "cache the same body mesh"
             )
         return list(frames)
     if src.is_dir():
@@ -369,7 +388,8 @@ def _load_targets(src: Path, faces: object, fps: float, animation: str | None) -
         raise ValueError(f"--targets {src}: no such file or folder")
     if src.suffix.lower() != ".npz":
         raise ValueError(
-            f"--targets {src}: give a folder of body OBJs, an .npz with 'vertices' (T, V, 3) or an animated .glb/.gltf"
+            f"--targets {src}: give a folder of body OBJs, an .npz with 'vertices' (T, V, 3), an animated "
+            ".glb/.gltf or USD stage, or a .pc2 point cache"
         )
     try:
         with np.load(src, allow_pickle=False) as z:
@@ -408,9 +428,7 @@ def cmd_animate(args: argparse.Namespace) -> int:
     if args.fps <= 0:
         raise ValueError(f"--fps must be > 0, got {args.fps}")
     if args.animation is not None and not args.targets:
-        raise ValueError(
-            "--animation picks an animation of a .glb/.gltf --targets file; give --canonical and --targets"
-        )
+        raise ValueError("--animation picks what a .glb/.gltf or USD --targets file animates; give --targets")
     if args.interpolate is not None and (not args.poses or args.interpolate < 2):
         raise ValueError("--interpolate N (N >= 2) resamples the keyframes of --poses FILE")
     import numpy as np
@@ -464,7 +482,7 @@ def cmd_animate(args: argparse.Namespace) -> int:
     else:
         canonical = load_mesh(args.canonical)
         faces = canonical[1]
-        targets = _load_targets(Path(args.targets), faces, args.fps, args.animation)
+        targets = _load_targets(Path(args.targets), faces, args)
     sim = GarSim.prior_only() if args.prior_only else GarSim.pretrained()
     frames = sim.drape_sequence(
         canonical,
@@ -925,12 +943,15 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument(
         "--targets",
-        help="folder of target body OBJs (in name order, numbers by value), an .npz with 'vertices' (T, V, 3), or "
-        "a .glb/.gltf whose body is animated (skin, shape keys or node motion; sampled at --fps from its first to "
-        "its last key)",
+        help="folder of target body OBJs (in name order, numbers by value), an .npz with 'vertices' (T, V, 3), a "
+        ".glb/.gltf whose body is animated (skin, shape keys or node motion; sampled at --fps from its first to "
+        "its last key), a USD stage (time-sampled points or a UsdSkel skin, one frame per time code, its declared "
+        "axis and unit converted to --up/--units) or a .pc2 point cache of the canonical body",
     )
     p.add_argument(
-        "--animation", help="which animation of a .glb/.gltf --targets file, by name or index (default: the first)"
+        "--animation",
+        help="a .glb/.gltf --targets file's animation by name or index (default: the first); a USD stage's body "
+        "mesh by prim name (default: Body, or its only mesh)",
     )
     p.add_argument("--fabric", default="cotton", type=fabric_arg, help=FABRIC_HELP)
     p.add_argument(

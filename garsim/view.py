@@ -238,62 +238,27 @@ def load_obj_folder(path: str | Path, up: str | None = None, units: str | None =
     )
 
 
-def _usd_mesh(stage: Any, prim: Any, name: str) -> tuple[np.ndarray, np.ndarray]:
-    """(T, V, 3) points over the stage's time samples (or its one default value), in the stage's frame (the prim's
-    transform ops applied), and (F, 3) triangles of a mesh."""
-    from pxr import Usd, UsdGeom
-
-    from garsim.geometry.io import triangulate_polygons
-
-    mesh = UsdGeom.Mesh(prim)
-    points = mesh.GetPointsAttr()
-    times = points.GetTimeSamples() or [None]
-    frames = []
-    for t in times:  # the points in the stage's frame: through the prim's and its parents' transforms at that time
-        code = Usd.TimeCode.Default() if t is None else Usd.TimeCode(t)
-        world = np.asarray(mesh.ComputeLocalToWorldTransform(code), dtype=np.float64)  # row vectors: p @ M
-        p = np.asarray(points.Get(code), dtype=np.float64)
-        frames.append(p @ world[:3, :3] + world[3, :3])
-    frames = np.stack(frames)
-    counts = np.asarray(mesh.GetFaceVertexCountsAttr().Get())
-    indices = np.asarray(mesh.GetFaceVertexIndicesAttr().Get(), dtype=np.int64)
-    if len(counts) == 0 or (counts != counts[0]).any() or counts[0] < 3:
-        raise ValueError(f"{name}: {prim.GetPath()} is not a mesh of triangles (or of one polygon size)")
-    return frames, triangulate_polygons(indices.reshape(-1, int(counts[0])))
-
-
 def load_usd(path: str | Path) -> ViewData:
     """A USD stage: the mesh named ``Garment`` (else the first mesh) and ``Body`` if there is one (as
-    :mod:`garsim.export` writes them), their time-sampled points converted from the stage's upAxis and metersPerUnit
-    to Z-up metres, at the stage's time codes per second."""
-    from pxr import Usd, UsdGeom
-
-    from garsim.geometry.io import y_up_to_z_up
+    :mod:`garsim.export` writes them), their time-sampled or skinned points converted from the stage's upAxis and
+    metersPerUnit to Z-up metres, at the stage's time codes per second (:mod:`garsim.geometry.usd_stage`)."""
+    from garsim.geometry.usd_stage import mesh_frames, open_stage, to_z_up_metres
 
     p = Path(path)
-    stage = Usd.Stage.Open(str(p))
-    if stage is None:
-        raise ValueError(f"{p}: not a readable USD stage")
-    meshes = {prim.GetName(): prim for prim in stage.Traverse() if prim.IsA(UsdGeom.Mesh)}
-    if not meshes:
-        raise ValueError(f"{p}: the stage holds no mesh")
+    stage, meshes = open_stage(p)
     garment = meshes.get("Garment", next(iter(meshes.values())))
-    scale = float(UsdGeom.GetStageMetersPerUnit(stage))
-
-    def internal(points: np.ndarray) -> np.ndarray:
-        v = points * scale
-        return y_up_to_z_up(v) if UsdGeom.GetStageUpAxis(stage) == UsdGeom.Tokens.y else v
-
-    frames, faces = _usd_mesh(stage, garment, p.name)
-    body = _usd_mesh(stage, meshes["Body"], p.name) if "Body" in meshes and meshes["Body"] != garment else None
+    frames, faces, _ = mesh_frames(stage, garment, p.name)
+    body = None
+    if "Body" in meshes and meshes["Body"] != garment:
+        body = mesh_frames(stage, meshes["Body"], p.name)[:2]
     if body is not None and len(body[0]) == 1 < len(frames):  # a body held still
         body = (np.broadcast_to(body[0], (len(frames), *body[0].shape[1:])), body[1])
     elif body is not None and len(body[0]) != len(frames):
         raise ValueError(f"{p.name}: the Body has {len(body[0])} time samples, the Garment {len(frames)}")
     return ViewData(
-        internal(frames),
+        to_z_up_metres(stage, frames),
         faces,
-        body_frames=None if body is None else internal(body[0]),
+        body_frames=None if body is None else to_z_up_metres(stage, body[0]),
         body_faces=None if body is None else body[1],
         fps=float(stage.GetTimeCodesPerSecond()),
         name=p.name,

@@ -247,3 +247,37 @@ def test_a_skinned_gltf_body_drives_animate_like_its_frames(case, tmp_path, caps
     assert main([*argv, "--out", str(tmp_path / "c.pc2")]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "no animation 'run'; it has 'move'" in err[0]
+
+
+def test_animate_reads_its_own_usd_and_pc2_bodies_as_targets(case, tmp_path, capsys):
+    """The body `animate` writes beside the garment (USD time samples, a PC2 cache) drives a second run like the
+    .npz it came from; a USD stage in centimetres and Y up is brought to the run's --up/--units."""
+    from pxr import Usd, UsdGeom, Vt
+
+    from garsim.export import read_pc2
+    from garsim.geometry.io import z_up_to_y_up
+
+    folder, g, canonical, bodies, faces = case
+    base = ["animate", "--garment", str(folder / "skirt.obj"), "--canonical", str(folder / "canonical.obj")]
+    base += ["--smoothing", "0", "--quiet", "--prior-only"]
+    assert main([*base, "--targets", str(folder / "bodies.npz"), "--out", str(tmp_path / "a.usdc")]) == 0
+    assert main([*base, "--targets", str(folder / "bodies.npz"), "--out", str(tmp_path / "a.pc2")]) == 0
+    expected = read_pc2(tmp_path / "a.pc2")[0]
+    for src in ("a.usdc", "a_body.pc2"):
+        assert main([*base, "--targets", str(tmp_path / src), "--out", str(tmp_path / f"from_{src}.pc2")]) == 0
+        np.testing.assert_allclose(read_pc2(tmp_path / f"from_{src}.pc2")[0], expected, atol=1e-5)
+
+    stage = Usd.Stage.Open(str(tmp_path / "a.usdc"))  # the same body, restated in Y-up centimetres
+    UsdGeom.SetStageUpAxis(stage, UsdGeom.Tokens.y)
+    UsdGeom.SetStageMetersPerUnit(stage, 0.01)
+    points = UsdGeom.Mesh(stage.GetPrimAtPath("/Scene/Body")).GetPointsAttr()
+    for k, b in enumerate(bodies):
+        points.Set(Vt.Vec3fArray.FromNumpy((100 * z_up_to_y_up(b)).astype("f4")), k)
+    stage.GetRootLayer().Export(str(tmp_path / "cm.usda"))
+    assert main([*base, "--targets", str(tmp_path / "cm.usda"), "--out", str(tmp_path / "cm.pc2")]) == 0
+    np.testing.assert_allclose(read_pc2(tmp_path / "cm.pc2")[0], expected, atol=1e-5)
+    assert (
+        main([*base, "--targets", str(tmp_path / "a.usdc"), "--animation", "Shirt", "--out", str(tmp_path / "x.pc2")])
+        == 2
+    )
+    assert "no mesh 'Shirt'; the stage has 'Garment', 'Body'" in capsys.readouterr().err

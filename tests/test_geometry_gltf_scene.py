@@ -1,6 +1,6 @@
 """glTF scenes as they show (garsim.geometry.gltf_scene): skins, morph targets, node motion and samplers against
-hand-computed cases, against USD's own skinning (UsdSkel) and trimesh's static reading, and read through
-load_mesh / load_mesh_animation."""
+hand-computed cases, against USD's own skinning (UsdSkel, also read back by garsim.geometry.usd_stage) and
+trimesh's static reading, and read through load_mesh / load_mesh_animation."""
 
 from __future__ import annotations
 
@@ -14,6 +14,7 @@ from gltf_builder import Doc
 
 from garsim.geometry.gltf_scene import GltfError, GltfScene
 from garsim.geometry.io import MeshError, load_mesh, load_mesh_animation, load_mesh_with_attributes
+from garsim.geometry.usd_stage import load_usd_animation
 
 
 def _z_quat(deg: float) -> list[float]:
@@ -103,6 +104,8 @@ def _usd_skinned_points(rest_local, anim, positions, joint_idx, joint_w, times):
     from pxr import Gf, Usd, UsdGeom, UsdSkel, Vt
 
     stage = Usd.Stage.CreateInMemory()
+    UsdGeom.SetStageUpAxis(stage, UsdGeom.Tokens.z)
+    UsdGeom.SetStageMetersPerUnit(stage, 0.01)  # centimetres: the reader converts
     root = UsdSkel.Root.Define(stage, "/Root")
     skel = UsdSkel.Skeleton.Define(stage, "/Root/Skel")
     names = ["j0", "j0/j1", "j0/j1/j2"]
@@ -123,6 +126,8 @@ def _usd_skinned_points(rest_local, anim, positions, joint_idx, joint_w, times):
     UsdSkel.BindingAPI.Apply(skel.GetPrim()).CreateAnimationSourceRel().SetTargets([a.GetPath()])
     mesh = UsdGeom.Mesh.Define(stage, "/Root/Mesh")
     mesh.CreatePointsAttr(Vt.Vec3fArray([Gf.Vec3f(*p) for p in positions]))
+    mesh.CreateFaceVertexCountsAttr([3])
+    mesh.CreateFaceVertexIndicesAttr([0, 1, 2])
     binding = UsdSkel.BindingAPI.Apply(mesh.GetPrim())
     binding.CreateSkeletonRel().SetTargets([skel.GetPath()])
     k = joint_idx.shape[1]
@@ -138,12 +143,13 @@ def _usd_skinned_points(rest_local, anim, positions, joint_idx, joint_w, times):
         points = Vt.Vec3fArray([Gf.Vec3f(*p) for p in positions])
         assert skin_query.ComputeSkinnedPoints(xforms, points, float(t))
         out.append(np.array(points))
-    return np.stack(out)
+    return np.stack(out), stage
 
 
 def test_skinning_matches_usdskel_on_a_random_rig(tmp_path):
     """A three-joint chain with random rest transforms, random animated translation / rotation / scale keys and
-    four random weights per vertex: the glTF reader and USD's UsdSkel skin the mesh alike at every key."""
+    four random weights per vertex: the glTF reader and USD's UsdSkel skin the mesh alike at every key, and
+    garsim's USD reader (usd_stage) gives UsdSkel's points from the saved stage, in metres."""
     rng = np.random.default_rng(3)
     v = rng.normal(size=(40, 3))
     joint_idx = np.stack([rng.permutation(3)[:2] for _ in range(40)])
@@ -166,7 +172,10 @@ def test_skinning_matches_usdskel_on_a_random_rig(tmp_path):
         )
         for _ in times
     ]
-    expected = _usd_skinned_points(np.array(rest), anim, v, joint_idx, joint_w, times)
+    expected, stage = _usd_skinned_points(np.array(rest), anim, v, joint_idx, joint_w, times)
+    stage.GetRootLayer().Export(str(tmp_path / "rig.usda"))
+    frames, _, _ = load_usd_animation(tmp_path / "rig.usda")  # its only mesh, skinned by UsdSkel, in metres
+    np.testing.assert_allclose(frames, 0.01 * expected, atol=1e-6)
 
     d = Doc()
     m = d.mesh(v, [[0, 1, 2]], JOINTS_0=d.add(joint_idx, 5123), WEIGHTS_0=d.add(joint_w))
