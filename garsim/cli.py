@@ -60,9 +60,10 @@ STRAP_CHOICES: tuple[str, ...] = ("band", "crest")
 """``garsim data generate --strap-pins`` (``garsim.physics.generate.STRAP_PINS``, repeated for the same reason)."""
 GROUP_CHOICES: tuple[str, ...] = ("canonical_pose", "construction", "fabric", "family", "paired", "pose_mode")
 """What `garsim eval --by` groups rows by (``garsim.eval.experiments.GROUPS``, repeated for the same reason)."""
-MESH_OUTPUTS: tuple[str, ...] = (".obj", ".ply", ".glb", ".off", ".stl")
-"""What ``garsim drape --out`` writes (``garsim.geometry.io.save_mesh``)."""
-MESH_INPUTS: tuple[str, ...] = (".obj", ".ply", ".glb", ".gltf", ".off", ".stl")
+USD_OUTPUTS: tuple[str, ...] = (".usd", ".usda", ".usdc")
+MESH_OUTPUTS: tuple[str, ...] = (".obj", ".ply", ".glb", ".off", ".stl", *USD_OUTPUTS)
+"""What ``garsim drape --out`` writes (``garsim.geometry.io.save_mesh``; USD: ``garsim.export``, one frame)."""
+MESH_INPUTS: tuple[str, ...] = (".obj", ".ply", ".glb", ".gltf", ".off", ".stl", ".usd", ".usda", ".usdc", ".usdz")
 """What ``garsim drape`` reads (``garsim.geometry.io.SUPPORTED_EXTENSIONS``)."""
 ANIMATION_OUTPUTS: tuple[str, ...] = (".glb", ".gltf", ".usd", ".usda", ".usdc", ".pc2", ".mp4", ".gif", ".npz")
 """What ``garsim animate --out`` writes (``garsim.export.SUPPORTED_EXTENSIONS``, and ``garsim view``'s ``.npz``)."""
@@ -275,14 +276,14 @@ def cmd_drape(args: argparse.Namespace) -> int:
     import numpy as np
 
     from garsim.api import GarSim, Scene, from_internal
-    from garsim.geometry.io import MeshError, load_mesh, load_mesh_with_attributes, save_mesh
+    from garsim.geometry.io import MeshError, save_mesh
 
-    canonical = load_mesh(args.canonical)
-    gv, gf, attributes = load_mesh_with_attributes(args.garment)  # UVs and normals go to the output
+    canonical = _read_input(args.canonical, args)
+    gv, gf, attributes = _read_input(args.garment, args, attributes=True)  # UVs and normals go to the output
     garment = (gv, gf)
     bodies = []
     for path in targets:  # every target is read and checked before the first drape
-        body = load_mesh(path)
+        body = _read_input(path, args)
         if body[0].shape != canonical[0].shape or not np.array_equal(body[1], canonical[1]):
             raise MeshError(
                 f"{path}: {len(body[0])} vertices, {len(body[1])} faces: the target body must have the canonical "
@@ -306,9 +307,14 @@ def cmd_drape(args: argparse.Namespace) -> int:
         # a Z-up result is turned Y-up for glTF (its axis, as `garsim animate` writes it) and with --y-up (Blender);
         # with --up y the result is already in the input's Y-up axis
         y_up = args.up == "z" and (args.y_up or path.suffix.lower() in (".glb", ".gltf"))
-        attrs = None if attributes.empty else attributes.recompute_normals(verts, gf)
-        axes = {"input_up": "y" if y_up or args.up == "y" else "z", "input_units": units}  # an OBJ's, for garsim view
-        save_mesh(path, verts, gf, y_up=y_up, attributes=attrs, metadata=axes)
+        if path.suffix.lower() in USD_OUTPUTS:  # one frame, in the input's axis and units, both declared
+            from garsim.export import export_animation
+
+            export_animation(path, verts[None], gf, up=args.up, units=units, uvs=attributes.vertex_uvs(gf, len(gv)))
+        else:
+            attrs = None if attributes.empty else attributes.recompute_normals(verts, gf)
+            axes = {"input_up": "y" if y_up or args.up == "y" else "z", "input_units": units}  # for garsim view
+            save_mesh(path, verts, gf, y_up=y_up, attributes=attrs, metadata=axes)
         print(path)
         if png_path is not None:
             print(png_path)
@@ -332,6 +338,20 @@ def _read_pinned(path: str) -> object:
     if not np.all(np.isfinite(values)) or not np.all(values == np.round(values)):
         raise ValueError(f"--pinned {p}: vertex indices must be integers")
     return values.astype(np.int64)
+
+
+def _read_input(path: str, args: argparse.Namespace, attributes: bool = False) -> tuple:
+    """A user's mesh file in file order, as ``load_mesh`` (``attributes``: ``load_mesh_with_attributes``) reads it;
+    a USD stage, which declares its axis and unit, brought to ``--up`` / ``--units`` like the other inputs."""
+    from garsim.geometry.io import USD_EXTENSIONS, MeshAttributes, from_internal, load_mesh, load_mesh_with_attributes
+
+    if Path(path).suffix.lower() in USD_EXTENSIONS:
+        from garsim.geometry.usd_stage import open_stage, to_z_up_metres
+
+        v, f = load_mesh(path)  # checked, in the stage's own axis and unit
+        v = from_internal(to_z_up_metres(open_stage(path)[0], v), args.up, args.units).astype("float32")
+        return (v, f, MeshAttributes()) if attributes else (v, f)
+    return load_mesh_with_attributes(path) if attributes else load_mesh(path)
 
 
 def _load_targets(src: Path, faces: object, args: argparse.Namespace) -> list:
@@ -435,7 +455,7 @@ def cmd_animate(args: argparse.Namespace) -> int:
 
     from garsim.api import GarSim, SequenceConfig, check_smoothing, fabric_fields
     from garsim.export import animation_files, export_animation
-    from garsim.geometry.io import from_internal, load_mesh, load_mesh_with_attributes
+    from garsim.geometry.io import from_internal
 
     inputs = (("--garment", args.garment), ("--canonical", args.canonical), ("--poses", args.poses))
     for o in animation_files(out, with_body=True):  # a .pc2 also writes <stem>.obj and the body's files
@@ -455,7 +475,7 @@ def cmd_animate(args: argparse.Namespace) -> int:
     fabric_fields(args.fabric)
     smoothing = check_smoothing(SequenceConfig.smoothing if args.smoothing is None else args.smoothing)
     pinned = "auto" if args.pinned == "auto" else _read_pinned(args.pinned) if args.pinned else None
-    gv, gf, attributes = load_mesh_with_attributes(args.garment)
+    gv, gf, attributes = _read_input(args.garment, args, attributes=True)
     garment = (gv, gf)
     uvs = attributes.vertex_uvs(gf, len(gv))  # the animation formats store one UV per vertex
     if uvs is None and attributes.uvs is not None:
@@ -480,7 +500,7 @@ def cmd_animate(args: argparse.Namespace) -> int:
         canonical = (from_internal(body.canonical().vertices, args.up, args.units), faces)
         targets = list(from_internal(poses.pose_bodies(body, sequence), args.up, args.units))
     else:
-        canonical = load_mesh(args.canonical)
+        canonical = _read_input(args.canonical, args)
         faces = canonical[1]
         targets = _load_targets(Path(args.targets), faces, args)
     sim = GarSim.prior_only() if args.prior_only else GarSim.pretrained()

@@ -2,13 +2,14 @@
 
 Reads a ``.glb``/``.gltf`` (garsim.export's animations frame by frame, or any glTF scene sampled over its first
 animation: node transforms, skins and morph targets applied, :mod:`garsim.geometry.gltf_scene`), a USD stage
-(``.usd``/``.usda``/``.usdc``: time-sampled points, through the prims' transforms, in its declared axis and unit), an
-``.npz`` with ``frames`` (T, N, 3) and ``faces`` (optional ``body_frames`` (T, Vb, 3) or (Vb, 3), ``body_faces``,
-``prior_frames`` (T, N, 3), ``fps``), a ``.pc2`` (+ the OBJ beside it, and ``<stem>_body.pc2``), one mesh file, or a
-folder of OBJs (one sequence in name order, numbers by value; files whose name contains ``body`` / ``prior`` are the
-body / the prior); a .pc2 or OBJ in the ``up`` axis and ``units`` given, else as garsim's metadata line in the OBJ
-says, else Z-up metres. The page has a frame slider with play, body and garment toggles and, when a prior is present,
-a prior-vs-prediction toggle and the correction ``|prediction - prior|`` as vertex colour.
+(``.usd``/``.usda``/``.usdc``/``.usdz``: time-sampled or skinned points, through the prims' transforms, in its
+declared axis and unit), an ``.npz`` with ``frames`` (T, N, 3) and ``faces`` (optional ``body_frames`` (T, Vb, 3) or
+(Vb, 3), ``body_faces``, ``prior_frames`` (T, N, 3), ``fps``), a ``.pc2`` (+ the OBJ beside it, and
+``<stem>_body.pc2``), one mesh file, or a folder of OBJs (one sequence in name order, numbers by value; files whose
+name contains ``body`` / ``prior`` are the body / the prior); a .pc2 or OBJ in the ``up`` axis and ``units`` given,
+else as garsim's metadata line in the OBJ says, else Z-up metres. The page has a frame slider with play, body and
+garment toggles and, when a prior is present, a prior-vs-prediction toggle and the correction ``|prediction - prior|``
+as vertex colour.
 
 viser is an optional extra (``pip install 'garsim[view]'``), imported only by :func:`serve`.
 """
@@ -26,7 +27,7 @@ from typing import Any
 
 import numpy as np
 
-from garsim.geometry.io import to_internal
+from garsim.geometry.io import USD_EXTENSIONS, to_internal
 from garsim.geometry.mesh import vertex_normals
 
 VIEWER_NEEDS = "garsim view needs viser: pip install 'garsim[view]'"
@@ -242,10 +243,11 @@ def load_usd(path: str | Path) -> ViewData:
     """A USD stage: the mesh named ``Garment`` (else the first mesh) and ``Body`` if there is one (as
     :mod:`garsim.export` writes them), their time-sampled or skinned points converted from the stage's upAxis and
     metersPerUnit to Z-up metres, at the stage's time codes per second (:mod:`garsim.geometry.usd_stage`)."""
-    from garsim.geometry.usd_stage import mesh_frames, open_stage, to_z_up_metres
+    from garsim.geometry.usd_stage import by_name, mesh_frames, open_stage, to_z_up_metres
 
     p = Path(path)
-    stage, meshes = open_stage(p)
+    stage, prims = open_stage(p)
+    meshes = by_name(prims)
     garment = meshes.get("Garment", next(iter(meshes.values())))
     frames, faces, _ = mesh_frames(stage, garment, p.name)
     body = None
@@ -287,7 +289,7 @@ def load_view_data(path: str | Path, up: str | None = None, units: str | None = 
         return load_gltf(p)
     if ext == ".npz":
         return load_npz(p)
-    if ext in (".usd", ".usda", ".usdc"):
+    if ext in USD_EXTENSIONS:
         return load_usd(p)
     if ext == ".pc2":
         from garsim.export import read_pc2

@@ -269,7 +269,7 @@ def test_cli_choices_match_the_library():
     assert FABRIC_CHOICES == FABRICS and MOTION_CHOICES == MOTIONS and set(MODEL_CHOICES) == set(MODELS)
     assert FAMILY_CHOICES == GARMENT_TYPES and GROUP_CHOICES == tuple(sorted(GROUPS)) and STRAP_CHOICES == STRAP_PINS
     assert set(ANIMATION_OUTPUTS) == set(SUPPORTED_EXTENSIONS) | {".npz"}  # .npz: the viewer's sequence
-    assert set(MESH_OUTPUTS) == set(MESH_EXTENSIONS) - {".gltf"} and set(MESH_INPUTS) == set(MESH_EXTENSIONS)
+    assert set(MESH_OUTPUTS) == set(MESH_EXTENSIONS) - {".gltf", ".usdz"} and set(MESH_INPUTS) == set(MESH_EXTENSIONS)
 
 
 # --- bad input: one line that says what to fix, exit status 2, no traceback, no output -----------------------------
@@ -900,3 +900,31 @@ def test_drape_writes_glb_in_metres_and_obj_in_the_input_units(scene, tmp_path):
         np.testing.assert_allclose(got, metres * scale, atol=1e-4 * scale)
         # garsim view places either in metres, Z up: the OBJ says its unit in garsim's metadata line
         np.testing.assert_allclose(load_view_data(tmp_path / f"out{ext}").frames[0], metres, atol=1e-5)
+
+
+def test_drape_reads_and_writes_usd_in_its_declared_axis_and_unit(scene, tmp_path):
+    """Canonical, target and garment as USD stages in Y up and centimetres (declared), draped with the CLI's default
+    Z-up metres: the same drape as from the OBJs; a USD output declares the run's axis and unit."""
+    from pxr import Usd, UsdGeom
+
+    from garsim import GarSim
+    from garsim.export import export_animation
+    from garsim.geometry.io import load_mesh, z_up_to_y_up
+    from garsim.view import load_view_data
+
+    folder, meshes = scene
+    for name in "ctg":
+        m = meshes[name]
+        export_animation(
+            tmp_path / f"{name}.usda", 100 * z_up_to_y_up(np.asarray(m.vertices))[None], m.faces, up="y", units="cm"
+        )
+    usd = ["--canonical", str(tmp_path / "c.usda"), "--target", str(tmp_path / "t.usda")]
+    argv = ["drape", "--prior-only", "--garment", str(tmp_path / "g.usda"), *usd]
+    expected = GarSim.prior_only().drape(meshes["c"], meshes["t"], meshes["g"])
+    assert main([*argv, "--out", str(tmp_path / "d.obj")]) == 0
+    np.testing.assert_allclose(load_mesh(tmp_path / "d.obj")[0], expected, atol=1e-5)
+    assert main([*argv, "--units", "cm", "--out", str(tmp_path / "d.usdc")]) == 0  # the inputs restated in cm
+    stage = Usd.Stage.Open(str(tmp_path / "d.usdc"))
+    assert UsdGeom.GetStageUpAxis(stage) == UsdGeom.Tokens.z and UsdGeom.GetStageMetersPerUnit(stage) == 0.01
+    np.testing.assert_allclose(load_mesh(tmp_path / "d.usdc")[0], 100 * expected, atol=1e-3)
+    np.testing.assert_allclose(load_view_data(tmp_path / "d.usdc").frames[0], expected, atol=1e-5)

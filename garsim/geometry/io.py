@@ -16,7 +16,9 @@ Vertex order: OBJ vertices are kept in file order; other files are read with ``p
 reordering); an OBJ the vectorised reader cannot take (odd tokens) goes to trimesh with ``maintain_order=True``.
 Relative (negative) indices, a UTF-8 byte-order mark and ``\\r`` line ends read as in a plain file (``obj_bytes``). A
 glTF is read as it shows, by :mod:`garsim.geometry.gltf_scene` (node transforms, skins and morph-target weights
-applied; its meshes in depth-first node order); :func:`load_mesh_animation` samples its animation.
+applied; its meshes in depth-first node order); :func:`load_mesh_animation` samples its animation. A USD stage is
+read by :mod:`garsim.geometry.usd_stage` (every mesh at the earliest time, skins applied, in traversal order) in its
+own declared axis and unit (``usd_stage.read_usd_mesh(..., z_up_metres=True)`` converts).
 STL stores a triangle soup without shared vertices; it is merged on load (the order is then the order of first
 appearance) and cannot round-trip vertex order.
 
@@ -55,8 +57,11 @@ from garsim.geometry.mesh import face_areas
 
 log = logging.getLogger(__name__)
 
-SUPPORTED_EXTENSIONS: tuple[str, ...] = (".obj", ".ply", ".glb", ".gltf", ".off", ".stl")
-"""File types :func:`load_mesh` reads; :func:`save_mesh` writes all but ``.gltf``."""
+USD_EXTENSIONS: tuple[str, ...] = (".usd", ".usda", ".usdc", ".usdz")
+SUPPORTED_EXTENSIONS: tuple[str, ...] = (".obj", ".ply", ".glb", ".gltf", ".off", ".stl", *USD_EXTENSIONS)
+"""File types :func:`load_mesh` reads; :func:`save_mesh` writes all but ``.gltf`` and USD (``garsim.export`` writes
+USD)."""
+_READ_ONLY: tuple[str, ...] = (".gltf", *USD_EXTENSIONS)
 
 DEGENERATE_AREA_RTOL = 1e-12
 """A face is degenerate when its area is below this times the squared bounding-box diagonal."""
@@ -210,7 +215,7 @@ def validate_mesh(vertices: Any, faces: Any, name: str = "mesh") -> tuple[np.nda
 def _check_path(path: str | os.PathLike, writing: bool) -> tuple[Path, str]:
     p = Path(path)
     ext = p.suffix.lower()
-    allowed = tuple(e for e in SUPPORTED_EXTENSIONS if not (writing and e == ".gltf"))
+    allowed = tuple(e for e in SUPPORTED_EXTENSIONS if not (writing and e in _READ_ONLY))
     if ext not in allowed:
         verb = "write" if writing else "read"
         raise MeshError(f"{p}: cannot {verb} {ext or 'files without an extension'!r}; use one of {', '.join(allowed)}")
@@ -611,6 +616,10 @@ def _load(path: str | os.PathLike, y_up: bool, attributes: bool) -> tuple[np.nda
     elif ext in (".glb", ".gltf"):
         scene = _gltf_scene(p)
         plain = scene.vertices(), scene.faces
+    elif ext in USD_EXTENSIONS:
+        from garsim.geometry.usd_stage import read_usd_mesh
+
+        plain = read_usd_mesh(p)
     if plain is not None:
         loaded, (vertices, faces) = None, plain
         if faces.size and faces.max() >= len(vertices):
@@ -702,7 +711,8 @@ def load_mesh_animation(
 
 
 def load_mesh(path: str | os.PathLike, y_up: bool = False) -> tuple[np.ndarray, np.ndarray]:
-    """Read a triangle mesh (OBJ/PLY/GLB/glTF/OFF/STL) in file order -> validated (vertices, faces).
+    """Read a triangle mesh (OBJ/PLY/GLB/glTF/OFF/STL/USD) in file order -> validated (vertices, faces), in the
+    file's coordinates (a USD stage's in its declared axis and unit).
 
     ``y_up=True`` converts a Y-up file (glTF/Blender) to garsim's Z-up.
     """

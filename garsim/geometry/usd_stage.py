@@ -9,14 +9,13 @@ from typing import Any
 
 import numpy as np
 
-from garsim.geometry.io import MeshError, triangulate_polygons, y_up_to_z_up
+from garsim.geometry.io import USD_EXTENSIONS, MeshError, triangulate_polygons, y_up_to_z_up
 
-USD_EXTENSIONS: tuple[str, ...] = (".usd", ".usda", ".usdc", ".usdz")
+__all__ = ["USD_EXTENSIONS", "by_name", "load_usd_animation", "mesh_frames", "open_stage", "read_usd_mesh"]
 
 
-def open_stage(path: str | Path) -> tuple[Any, dict[str, Any]]:
-    """(the stage, its meshes by prim name in traversal order); MeshError for an unreadable stage or one without a
-    mesh."""
+def open_stage(path: str | Path) -> tuple[Any, list[Any]]:
+    """(the stage, its mesh prims in traversal order); MeshError for an unreadable stage or one without a mesh."""
     from pxr import Usd, UsdGeom
 
     p = Path(path)
@@ -26,10 +25,18 @@ def open_stage(path: str | Path) -> tuple[Any, dict[str, Any]]:
         stage = Usd.Stage.Open(str(p))
     except Exception as exc:  # noqa: BLE001 - pxr raises its own Tf.ErrorException
         raise MeshError(f"{p}: not a readable USD stage ({str(exc).strip().splitlines()[-1][:200]})") from None
-    meshes = {prim.GetName(): prim for prim in stage.Traverse() if prim.IsA(UsdGeom.Mesh)}
+    meshes = [prim for prim in stage.Traverse() if prim.IsA(UsdGeom.Mesh)]
     if not meshes:
         raise MeshError(f"{p}: the stage holds no mesh")
     return stage, meshes
+
+
+def by_name(prims: list[Any]) -> dict[str, Any]:
+    """Mesh prims by their name (the first of a name in traversal order)."""
+    out: dict[str, Any] = {}
+    for prim in prims:
+        out.setdefault(prim.GetName(), prim)
+    return out
 
 
 def to_z_up_metres(stage: Any, points: np.ndarray) -> np.ndarray:
@@ -41,6 +48,9 @@ def to_z_up_metres(stage: Any, points: np.ndarray) -> np.ndarray:
 
 
 def _faces(mesh: Any, name: str) -> np.ndarray:
+    from pxr import UsdGeom
+
+    mesh = UsdGeom.Mesh(mesh)
     counts, indices = mesh.GetFaceVertexCountsAttr().Get(), mesh.GetFaceVertexIndicesAttr().Get()
     if counts is None or indices is None:
         raise MeshError(f"{name}: {mesh.GetPath()} has no faces (faceVertexCounts / faceVertexIndices)")
@@ -68,52 +78,82 @@ def _skinning(prim: Any) -> tuple[Any, Any, Any] | None:
     return skin, cache.GetSkelQuery(skeleton), skeleton.GetPrim()
 
 
-def mesh_frames(stage: Any, prim: Any, name: str) -> tuple[np.ndarray, np.ndarray, list[float]]:
-    """(T, V, 3) points of a mesh in the stage's frame at each time code of its animation (a skin's or its points'
-    time samples; one frame at the default time when neither is animated), (F, 3) triangles, the time codes."""
-    from pxr import Usd, UsdGeom, Vt
+def _world_points(prim: Any, skinned: tuple[Any, Any, Any] | None, code: Any, name: str) -> np.ndarray:
+    """(V, 3) points of a mesh in the stage's frame at one time code: skinned by UsdSkel through the skeleton's
+    transform, else through the prim's and its parents' transforms."""
+    from pxr import UsdGeom, Vt
 
     mesh = UsdGeom.Mesh(prim)
-    points = mesh.GetPointsAttr()
-    rest = np.asarray(points.Get(Usd.TimeCode.Default()) or points.Get(Usd.TimeCode.EarliestTime()), dtype=np.float64)
-    skinned = _skinning(prim)
-    frames = []
+    value = mesh.GetPointsAttr().Get(code)
+    if value is None or len(value) == 0:
+        raise MeshError(f"{name}: {prim.GetPath()} has no points at time {code}")
+    xformable = UsdGeom.Xformable(prim if skinned is None else skinned[2])
+    world = np.asarray(xformable.ComputeLocalToWorldTransform(code), dtype=np.float64)  # row vectors: p @ M
+    p = np.asarray(value, dtype=np.float64)
     if skinned is not None:
-        skin, skel_query, skel_prim = skinned
-        if skin.HasBlendShapes():
-            raise MeshError(f"{name}: {prim.GetPath()} has UsdSkel blend shapes (not applied); bake them")
-        anim = skel_query.GetAnimQuery()
+        skin, skel_query, _ = skinned
+        out = Vt.Vec3fArray.FromNumpy(p.astype(np.float32))
+        if not skin.ComputeSkinnedPoints(skel_query.ComputeSkinningTransforms(code), out, code):
+            raise MeshError(f"{name}: USD could not skin {prim.GetPath()} at time {code}")
+        p = np.asarray(out, dtype=np.float64)
+    return p @ world[:3, :3] + world[3, :3]
+
+
+def _skinned_checked(prim: Any, name: str) -> tuple[Any, Any, Any] | None:
+    skinned = _skinning(prim)
+    if skinned is not None and skinned[0].HasBlendShapes():
+        raise MeshError(f"{name}: {prim.GetPath()} has UsdSkel blend shapes (not applied); bake them")
+    return skinned
+
+
+def mesh_frames(stage: Any, prim: Any, name: str) -> tuple[np.ndarray, np.ndarray, list[float]]:
+    """(T, V, 3) points of a mesh in the stage's frame at each time code of its animation (a skin's or its points'
+    time samples; one frame at the earliest time when neither is animated), (F, 3) triangles, the time codes."""
+    from pxr import Usd, UsdGeom
+
+    skinned = _skinned_checked(prim, name)
+    if skinned is not None:
+        anim = skinned[1].GetAnimQuery()
         times = list(anim.GetJointTransformTimeSamples()) if anim else []
-        for t in times or [None]:
-            code = Usd.TimeCode.Default() if t is None else Usd.TimeCode(t)
-            p = np.asarray(points.Get(code) or rest, dtype=np.float64)
-            out = Vt.Vec3fArray.FromNumpy(p.astype(np.float32))
-            if not skin.ComputeSkinnedPoints(skel_query.ComputeSkinningTransforms(code), out, code):
-                raise MeshError(f"{name}: USD could not skin {prim.GetPath()} at time {t}")
-            world = np.asarray(UsdGeom.Xformable(skel_prim).ComputeLocalToWorldTransform(code), dtype=np.float64)
-            frames.append(np.asarray(out, dtype=np.float64) @ world[:3, :3] + world[3, :3])  # row vectors: p @ M
     else:
-        times = list(points.GetTimeSamples())
-        for t in times or [None]:  # through the prim's and its parents' transforms at that time
-            code = Usd.TimeCode.Default() if t is None else Usd.TimeCode(t)
-            world = np.asarray(mesh.ComputeLocalToWorldTransform(code), dtype=np.float64)
-            p = np.asarray(points.Get(code), dtype=np.float64)
-            frames.append(p @ world[:3, :3] + world[3, :3])
-    return np.stack(frames), _faces(mesh, name), [float(t) for t in times]
+        times = list(UsdGeom.Mesh(prim).GetPointsAttr().GetTimeSamples())
+    codes = [Usd.TimeCode(t) for t in times] or [Usd.TimeCode.EarliestTime()]
+    frames = np.stack([_world_points(prim, skinned, code, name) for code in codes])
+    return frames, _faces(UsdGeom.Mesh(prim), name), [float(t) for t in times]
+
+
+def read_usd_mesh(path: str | Path, z_up_metres: bool = False) -> tuple[np.ndarray, np.ndarray]:
+    """Every mesh of a USD stage as it shows at its earliest time (skins applied), concatenated in traversal order ->
+    (vertices, faces): in the stage's own axis and unit, or in garsim's Z-up metres with ``z_up_metres``."""
+    from pxr import Usd
+
+    p = Path(path)
+    stage, meshes = open_stage(p)
+    vertices, faces, offset = [], [], 0
+    for prim in meshes:
+        v = _world_points(prim, _skinned_checked(prim, p.name), Usd.TimeCode.EarliestTime(), p.name)
+        faces.append(_faces(prim, p.name) + offset)
+        vertices.append(v)
+        offset += len(v)
+    v = np.concatenate(vertices)
+    return (to_z_up_metres(stage, v) if z_up_metres else v), np.concatenate(faces)
 
 
 def load_usd_animation(path: str | Path, mesh: str | None = None) -> tuple[np.ndarray, np.ndarray, float]:
     """A USD stage's animated mesh (the prim named ``mesh``; default ``Body`` if there is one, else the only mesh) ->
     (frames (T, V, 3) in Z-up metres, faces, time codes per second)."""
     p = Path(path)
-    stage, meshes = open_stage(p)
+    stage, prims = open_stage(p)
+    meshes = by_name(prims)
     if mesh is None:
         if "Body" in meshes:
             mesh = "Body"
         elif len(meshes) == 1:
             mesh = next(iter(meshes))
         else:
-            raise MeshError(f"{p}: the stage holds several meshes ({', '.join(meshes)}); name the body's prim")
+            raise MeshError(
+                f"{p}: the stage holds several meshes ({', '.join(meshes)}); name the body's prim (CLI: --animation)"
+            )
     if mesh not in meshes:
         raise MeshError(f"{p}: no mesh {mesh!r}; the stage has {', '.join(map(repr, meshes))}")
     frames, faces, _ = mesh_frames(stage, meshes[mesh], p.name)
