@@ -23,7 +23,7 @@ class Doc:
     def add(self, array, ctype: int = 5126, normalized: bool = False) -> int:
         a = np.asarray(array)
         width = 1 if a.ndim == 1 else a.shape[1]
-        dtype = {5126: "<f4", 5125: "<u4", 5123: "<u2", 5121: "u1"}[ctype]
+        dtype = {5126: "<f4", 5125: "<u4", 5123: "<u2", 5122: "<i2", 5121: "u1"}[ctype]
         data = a.astype(dtype).tobytes()
         self.blob += b"\0" * (-len(self.blob) % 4)
         self.doc["bufferViews"].append({"buffer": 0, "byteOffset": len(self.blob), "byteLength": len(data)})

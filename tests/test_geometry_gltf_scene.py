@@ -262,3 +262,17 @@ def test_interleaved_sparse_and_strip_primitives(tmp_path):
     scene = GltfScene.read(d.write(tmp_path / "strip.glb", [d.node(mesh=0)]))
     np.testing.assert_array_equal(scene.faces, [[0, 1, 2], [1, 3, 2]])  # the second triangle flipped back
     np.testing.assert_allclose(scene.vertices(), pos + [[0, 0, 0], [0, 0, 1], [0, 0, 0], [0, 0, 2]], atol=1e-6)
+
+
+def test_quantised_positions_and_uvs(tmp_path):
+    """KHR_mesh_quantization: int16 positions scaled by their node, normalised uint16 UVs, read as numbers."""
+    d = Doc()
+    pos = np.array([[0, 0, 0], [1000, 0, 0], [0, 1000, 0]])
+    m = d.mesh(np.zeros((3, 3)), [[0, 1, 2]], TEXCOORD_0=d.add(np.array([[0, 0], [65535, 0], [0, 65535]]), 5123, True))
+    d.doc["accessors"][d.doc["meshes"][m]["primitives"][0]["attributes"]["POSITION"]] = d.doc["accessors"][
+        d.add(pos, 5122)
+    ]
+    d.doc["extensionsRequired"] = d.doc["extensionsUsed"] = ["KHR_mesh_quantization"]
+    scene = GltfScene.read(d.write(tmp_path / "q.glb", [d.node(mesh=m, scale=[0.001] * 3)]))
+    np.testing.assert_allclose(scene.vertices(), [[0, 0, 0], [1, 0, 0], [0, 1, 0]], atol=1e-9)
+    np.testing.assert_allclose(scene.uvs, [[0, 0], [1, 0], [0, 1]], atol=1e-9)

@@ -13,9 +13,10 @@ depth-first node order (children in their listed order; each primitive's vertice
   ``STEP``, ``LINEAR`` and ``CUBICSPLINE`` samplers, held at their first and last keys outside their range.
 
 Accessors may be strided, normalised integers or sparse. Buffers come from the GLB's binary chunk, base64 ``data:``
-URIs, or files beside a ``.gltf`` (never from the network). Geometry the reader cannot decode (Draco or meshopt
-compression, quantised attributes, GPU instancing: an ``extensionsRequired`` entry) is refused by name. Coordinates
-are returned as stored: glTF's Y-up metres (:func:`garsim.geometry.io.y_up_to_z_up` turns them to garsim's axes).
+URIs, or files beside a ``.gltf`` (never from the network); quantised attributes (``KHR_mesh_quantization``) are read
+as numbers. Geometry the reader cannot decode (Draco or meshopt compression, GPU instancing: an ``extensionsRequired``
+entry) is refused by name. Coordinates are returned as stored: glTF's Y-up metres
+(:func:`garsim.geometry.io.y_up_to_z_up` turns them to garsim's axes).
 """
 
 from __future__ import annotations
@@ -32,8 +33,9 @@ import numpy as np
 _DTYPES = {5120: "i1", 5121: "u1", 5122: "<i2", 5123: "<u2", 5125: "<u4", 5126: "<f4"}
 _WIDTHS = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4, "MAT2": 4, "MAT3": 9, "MAT4": 16}
 _NORMALISED_MAX = {5120: 127.0, 5121: 255.0, 5122: 32767.0, 5123: 65535.0}
-_HARMLESS_PREFIXES = ("KHR_materials_", "KHR_texture_", "EXT_texture_", "KHR_lights_punctual")
-"""Required extensions that change only how surfaces look, not where the vertices are."""
+_HARMLESS_PREFIXES = ("KHR_materials_", "KHR_texture_", "EXT_texture_", "KHR_lights_punctual", "KHR_mesh_quantization")
+"""Required extensions this reader can take: those that change only how surfaces look, and quantised attributes
+(integer positions, morph targets and UVs, read as numbers)."""
 
 
 class GltfError(ValueError):
@@ -198,7 +200,7 @@ class GltfScene:
         required = [e for e in doc.get("extensionsRequired") or [] if not str(e).startswith(_HARMLESS_PREFIXES)]
         if required:
             raise GltfError(
-                f"{name}: the file needs {', '.join(map(str, required))} (compressed or quantised geometry), which "
+                f"{name}: the file needs {', '.join(map(str, required))} (compressed geometry or instancing), which "
                 "garsim cannot read; export it without compression"
             )
         self.nodes: list[dict] = doc.get("nodes") or []
@@ -301,7 +303,7 @@ class GltfScene:
         attrs = prim.get("attributes", {})
         if "POSITION" not in attrs:
             raise GltfError(f"{self.name}: a mesh primitive has no POSITION attribute")
-        pos = self._accessor(attrs["POSITION"])
+        pos = self._accessor(attrs["POSITION"]).astype(np.float64)  # quantised files store integers
         idx = self._accessor(prim["indices"])[:, 0].astype(np.int64) if "indices" in prim else np.arange(len(pos))
         if mode == 4:
             faces = idx[: len(idx) // 3 * 3].reshape(-1, 3)
@@ -316,7 +318,7 @@ class GltfScene:
         deltas = [
             self._accessor(t["POSITION"]) if "POSITION" in t else np.zeros_like(pos) for t in prim.get("targets", [])
         ]
-        targets = np.stack(deltas) if deltas else np.zeros((0, len(pos), 3))
+        targets = np.stack(deltas).astype(np.float64) if deltas else np.zeros((0, len(pos), 3))
         joints = weights = None
         if skinned:
             sets = sorted(int(k.split("_")[1]) for k in attrs if k.startswith("JOINTS_"))
@@ -328,7 +330,7 @@ class GltfScene:
             if np.any(total <= 0):
                 raise GltfError(f"{self.name}: a skinned vertex has all-zero joint weights")
             weights = weights / total
-        uvs = self._accessor(attrs["TEXCOORD_0"]) if "TEXCOORD_0" in attrs else None
+        uvs = self._accessor(attrs["TEXCOORD_0"]).astype(np.float64) if "TEXCOORD_0" in attrs else None
         return _Primitive(pos, faces, targets, joints, weights, uvs)
 
     # ------------------------------------------------------------------ evaluation
