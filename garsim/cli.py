@@ -493,16 +493,20 @@ def cmd_animate(args: argparse.Namespace) -> int:
             if args.interpolate is not None:
                 sequence = poses.resample_poses(sequence, args.interpolate)
         from garsim.bodies.anny import AnnyBody
+        from garsim.export import BodySkin
 
         body = AnnyBody()
         faces = body.faces
         # Anny's bodies are in garsim's Z-up metres; the garment is in --up / --units: bring the bodies there
         canonical = (from_internal(body.canonical().vertices, args.up, args.units), faces)
-        targets = list(from_internal(poses.pose_bodies(body, sequence), args.up, args.units))
+        posed, transforms = poses.pose_bodies_rigged(body, sequence)
+        targets = list(from_internal(posed, args.up, args.units))
+        rig = BodySkin(body.rest_vertices, body.skin_weights, body.skin_indices, transforms, tuple(body.bone_labels))
     else:
         canonical = _read_input(args.canonical, args)
         faces = canonical[1]
         targets = _load_targets(Path(args.targets), faces, args)
+        rig = None
     sim = GarSim.prior_only() if args.prior_only else GarSim.pretrained()
     frames = sim.drape_sequence(
         canonical,
@@ -548,6 +552,7 @@ def cmd_animate(args: argparse.Namespace) -> int:
         body_frames=np.stack(targets),
         body_faces=faces,
         fps=args.fps,
+        body_skin=rig,  # an Anny body goes into a glTF skinned to its bones
         **extra,
     )
     for path in written:

@@ -702,6 +702,12 @@ def resample_poses(poses: Sequence[Mapping[str, np.ndarray]], num_frames: int) -
     return out
 
 
+def pose_bodies_rigged(body: AnnyBody, poses: Sequence[Mapping[str, np.ndarray]]) -> tuple[np.ndarray, np.ndarray]:
+    """Body vertices (T, V, 3) of ``body`` in each pose of a sequence, and its bones' skinning transforms
+    (T, J, 4, 4): linear blend skinning of ``body.rest_vertices`` by them gives the vertices."""
+    return body.pose_batch(batched_matrices(stack_poses(poses)))
+
+
 def pose_bodies(body: AnnyBody, poses: Sequence[Mapping[str, np.ndarray]]) -> np.ndarray:
     """Body vertices (T, V, 3) of ``body`` in each pose of a sequence."""
-    return body.pose_batch(batched_matrices(stack_poses(poses)))[0]
+    return pose_bodies_rigged(body, poses)[0]

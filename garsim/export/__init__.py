@@ -12,7 +12,7 @@ root-layer ``customLayerData["garsim"]`` (JSON text), PC2 a ``# garsim {json}`` 
 beside the cache; MP4/GIF previews carry none.
 
 ========================  ===============================================================
-``.glb`` / ``.gltf``      :func:`write_gltf_animation` - morph target per frame, Y up
+``.glb`` / ``.gltf``      :func:`write_gltf_animation` - morph target per frame (a rigged body skinned), Y up
 ``.usd/.usda/.usdc``      :func:`write_usd_animation` - time-sampled points, up axis and units declared
 ``.pc2``                  :func:`write_pc2_animation` - cache + frame-0 OBJ (Blender Mesh Cache)
 ``.mp4`` / ``.gif``       :func:`write_preview` - rendered preview clip
@@ -29,7 +29,7 @@ from typing import Any
 import numpy as np
 
 from garsim.export._common import ExportError, check_extension
-from garsim.export.gltf import GLTF_EXTENSIONS, write_gltf_animation
+from garsim.export.gltf import GLTF_EXTENSIONS, BodySkin, write_gltf_animation
 from garsim.export.pc2 import (
     PC2_EXTENSIONS,
     pc2_files,
@@ -46,6 +46,7 @@ from garsim.geometry.io import UNITS, to_internal
 SUPPORTED_EXTENSIONS: tuple[str, ...] = GLTF_EXTENSIONS + USD_EXTENSIONS + PC2_EXTENSIONS + VIDEO_EXTENSIONS
 
 __all__ = [
+    "BodySkin",
     "ExportError",
     "SUPPORTED_EXTENSIONS",
     "animation_files",
@@ -78,7 +79,9 @@ def export_animation(
 ) -> list[Path]:
     """Write a garment animation in the format named by ``path``'s extension -> the files written (main first).
 
-    Keyword arguments go to the writer (``body_frames``, ``body_faces``, ``fps``, ``uvs``, ``normals``, ...).
+    Keyword arguments go to the writer (``body_frames``, ``body_faces``, ``fps``, ``uvs``, ``normals``, ...);
+    ``body_skin`` (a :class:`garsim.export.gltf.BodySkin` in Z-up metres, posing ``body_frames``) makes a glTF's body
+    a skinned mesh and is ignored by the other formats.
     ``up`` ('z' or 'y') and ``units`` ('m', 'cm', 'mm'): the axis and length unit of ``frames`` and ``body_frames``
     (a user's, e.g. Blender's Y up): PC2 + OBJ keep them as given, USD declares them (upAxis, metersPerUnit), glTF
     (Y up, metres by its specification) and the previews get them converted.
@@ -89,6 +92,7 @@ def export_animation(
     go there) and, with a body, ``<stem>_body.pc2`` + ``<stem>_body.obj``; ``fps`` is ignored for PC2.
     """
     p, ext = check_extension(path, SUPPORTED_EXTENSIONS, "export_animation")
+    skin = kw.pop("body_skin", None)  # glTF writes a rigged body skinned; the other formats store its frames
     if up not in ("z", "y") or units not in UNITS:
         raise ExportError(f"up must be 'z' or 'y' and units one of {', '.join(UNITS)}, got {up!r} and {units!r}")
     if ext in USD_EXTENSIONS:
@@ -99,7 +103,7 @@ def export_animation(
             if kw.get(key) is not None:
                 kw[key] = _internal(kw[key], up, units if key == "body_frames" else "m")
     if ext in GLTF_EXTENSIONS:
-        return [write_gltf_animation(p, frames, faces, metadata=metadata, **kw)]
+        return [write_gltf_animation(p, frames, faces, metadata=metadata, body_skin=skin, **kw)]
     if ext in VIDEO_EXTENSIONS:
         return [write_preview(p, frames, faces, metadata=metadata, **kw)]
     return write_pc2_animation(p, frames, faces, metadata=metadata, **kw)
