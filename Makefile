@@ -45,13 +45,15 @@ data: $(STAMP)
 	$(GENERATE) --workers 2 $(TRAIN_FOLDER)
 
 # The v1.0 training recipe from scratch on the v5 training folder (issue 9; docs/studies/scratch_v5.md: 48 minutes on
-# 1,196 samples on the 2 cores, about 2 hours on the complete folder), in resumable stages (rerun to continue); it
-# prints the model folder to ship (stage 1, then the fine-tune averaged with it):
+# 1,196 samples on the 2 cores), in resumable stages (rerun to continue); it prints the model folder to ship (stage 1,
+# then the fine-tune averaged with it). One remeshed variant per sample, not the rehearsals' two: on the complete
+# folder (~3,150 samples) two would cache ~37,800 graphs, ~24 GB for the two processes, more than this machine's
+# memory; one caches ~25,200 (~19 GB), ~8 minutes an epoch, about 2.5 hours in all (docs/studies/training_cost.md):
 #   nohup make train > ~/garsim-runs/train.log 2>&1 &     then: make results RUN=~/garsim-runs/v1/stage1 MODEL=<printed>
 TRAIN_DATA ?= $(DATA_ROOT)/v5
 train: $(STAMP)
 	DATA=$(TRAIN_DATA) OUT=$(RUN) PROCS=2 BATCH=4 LR=5e-4 STAGE1_EPOCHS=12 FINETUNE_EPOCHS=4 FABRIC_EPOCHS=0 \
-	  STAGE2_EPOCHS=0 REMESH=2 MIRROR=1 PAIR=1 SOUP=1 bash examples/train_v1.sh
+	  STAGE2_EPOCHS=0 REMESH=1 MIRROR=1 PAIR=1 SOUP=1 bash examples/train_v1.sh
 
 # The results report (docs/results.md and its figures) from the dataset, the model and its training run (when
 # RUN exists; otherwise docs/training_curve.png is kept):
