@@ -276,3 +276,25 @@ def test_quantised_positions_and_uvs(tmp_path):
     scene = GltfScene.read(d.write(tmp_path / "q.glb", [d.node(mesh=m, scale=[0.001] * 3)]))
     np.testing.assert_allclose(scene.vertices(), [[0, 0, 0], [1, 0, 0], [0, 1, 0]], atol=1e-9)
     np.testing.assert_allclose(scene.uvs, [[0, 0], [1, 0], [0, 1]], atol=1e-9)
+
+
+def test_mirrored_nodes_stitched_strips_partial_uvs_and_float32_key_times(tmp_path):
+    """A node scaled by -1 shows the other side (winding reversed); a strip's stitching triangles are dropped; a
+    primitive without UVs gets (0, 0); keys at k / 24 s stored in float32 keep their last frame."""
+    d = Doc()
+    tri = np.array([[0.0, 0, 0], [1, 0, 0], [0, 1, 0]])
+    m = d.mesh(tri, [[0, 1, 2]], TEXCOORD_0=d.add(np.array([[0.0, 0], [1, 0], [0, 1]])))
+    strip = {"attributes": {"POSITION": d.add(np.arange(24.0).reshape(8, 3))}, "mode": 5}
+    strip["indices"] = d.add(np.array([0, 1, 2, 3, 3, 4, 4, 5, 6, 7]), 5125)
+    d.doc["meshes"][m]["primitives"].append(strip)
+    n = d.node(mesh=m, scale=[-1.0, 1.0, 1.0])
+    times = (np.arange(51) / 24).astype(np.float32)
+    d.animate([(n, "translation", times.tolist(), [[0.0, 0.01 * k, 0] for k in range(51)], "LINEAR")])
+    scene = GltfScene.read(d.write(tmp_path / "m.glb", [n]))
+    assert scene.faces[0].tolist() == [2, 1, 0]  # mirrored: the winding reversed
+    assert len(scene.faces) == 1 + 4  # two quads from the strip, its two stitching triangles dropped
+    np.testing.assert_allclose(scene.uvs[3:], 0.0)
+    assert scene.uvs.shape == (11, 2)
+    frames = scene.frames(24.0)
+    assert len(frames) == 51
+    np.testing.assert_allclose(frames[-1, 0], [0, 0.5, 0], atol=1e-6)

@@ -4,7 +4,8 @@ vertices, at rest or sampled over an animation (numpy, json and struct only).
 What a viewer shows is what this returns: every triangle primitive of every mesh node of the default scene, in
 depth-first node order (children in their listed order; each primitive's vertices in file order, concatenated), with
 
-- the node's world transform (``matrix``, or ``translation`` / ``rotation`` / ``scale``, parents first);
+- the node's world transform (``matrix``, or ``translation`` / ``rotation`` / ``scale``, parents first), a mirroring
+  one (negative determinant at rest) reversing the triangles' winding as the specification says;
 - morph targets blended by the node's ``weights`` (else the mesh's; animated ``weights`` override both);
 - a skin as the specification defines it: each vertex moved by the weighted sum of its joints' matrices
   ``world(joint) @ inverseBindMatrix`` (``JOINTS_n`` / ``WEIGHTS_n``, weights renormalised to sum to one), the
@@ -12,11 +13,12 @@ depth-first node order (children in their listed order; each primitive's vertice
 - animation channels on ``translation``, ``rotation`` (shortest-arc slerp), ``scale`` and ``weights``, with
   ``STEP``, ``LINEAR`` and ``CUBICSPLINE`` samplers, held at their first and last keys outside their range.
 
-Accessors may be strided, normalised integers or sparse. Buffers come from the GLB's binary chunk, base64 ``data:``
-URIs, or files beside a ``.gltf`` (never from the network); quantised attributes (``KHR_mesh_quantization``) are read
-as numbers. Geometry the reader cannot decode (Draco or meshopt compression, GPU instancing: an ``extensionsRequired``
-entry) is refused by name. Coordinates are returned as stored: glTF's Y-up metres
-(:func:`garsim.geometry.io.y_up_to_z_up` turns them to garsim's axes).
+Triangle strips and fans lose the degenerate triangles that stitch them; a primitive without ``TEXCOORD_0`` in a file
+whose other primitives have one gets (0, 0). Accessors may be strided, normalised integers or sparse. Buffers come
+from the GLB's binary chunk, base64 ``data:`` URIs, or files beside a ``.gltf`` (never from the network); quantised
+attributes (``KHR_mesh_quantization``) are read as numbers. Geometry the reader cannot decode (Draco or meshopt
+compression, GPU instancing: an ``extensionsRequired`` entry) is refused by name. Coordinates are returned as stored:
+glTF's Y-up metres (:func:`garsim.geometry.io.y_up_to_z_up` turns them to garsim's axes).
 """
 
 from __future__ import annotations
@@ -236,9 +238,21 @@ class GltfScene:
         if not self._prims:
             raise GltfError(f"{name}: the scene has no triangle mesh (only points, lines or empty nodes)")
         offsets = np.cumsum([0] + [len(p.positions) for _, p in self._prims])
-        self.faces = np.concatenate([p.faces + o for (_, p), o in zip(self._prims, offsets)]).astype(np.int64)
+        rest = self._worlds({}, 1)
+        mirrored = [  # a node whose transform mirrors (negative determinant) shows its triangles' other side
+            "skin" not in self.nodes[i] and np.linalg.det(rest[i][0, :3, :3]) < 0 for i, _ in self._prims
+        ]
+        self.faces = np.concatenate(
+            [(p.faces[:, ::-1] if flip else p.faces) + o for (_, p), o, flip in zip(self._prims, offsets, mirrored)]
+        ).astype(np.int64)
         uv = [p.uvs for _, p in self._prims]
-        self.uvs = None if any(u is None for u in uv) else np.concatenate(uv)
+        self.uvs = (  # a primitive without texture coordinates gets (0, 0), as a viewer samples it
+            None
+            if all(u is None for u in uv)
+            else np.concatenate(
+                [np.zeros((len(p.positions), 2)) if u is None else u for (_, p), u in zip(self._prims, uv)]
+            )
+        )
         self.animations: list[str] = [
             str(a.get("name") or f"animation {k}") for k, a in enumerate(doc.get("animations") or [])
         ]
@@ -313,6 +327,8 @@ class GltfScene:
         else:  # fan around the first index
             k = np.arange(1, max(len(idx) - 1, 1))
             faces = np.stack([np.full(len(k), idx[0]), idx[k], idx[k + 1]], axis=1)
+        if mode != 4:  # strips and fans are stitched with triangles that repeat an index: viewers draw nothing there
+            faces = faces[(faces[:, 0] != faces[:, 1]) & (faces[:, 1] != faces[:, 2]) & (faces[:, 0] != faces[:, 2])]
         if faces.size and (faces.min() < 0 or faces.max() >= len(pos)):
             raise GltfError(f"{self.name}: a face indexes vertex {int(faces.max())} of {len(pos)}")
         deltas = [
@@ -380,7 +396,7 @@ class GltfScene:
         if not fps > 0:
             raise GltfError(f"frames per second must be > 0, got {fps}")
         t0, t1 = self.duration(animation)
-        n = int(np.floor((t1 - t0) * fps + 1e-6)) + 1
+        n = int(np.floor((t1 - t0) * fps + 1e-3)) + 1  # key times are float32: a last key within 1e-3 frame counts
         return t0 + np.arange(n) / float(fps)
 
     def vertices(self, times: np.ndarray | None = None, animation: int | str | None = None) -> np.ndarray:
@@ -391,9 +407,7 @@ class GltfScene:
         channels = [] if rest else self._channels(self.animation_index(animation))
         T = len(t)
         animated: dict[tuple[int, str], np.ndarray] = {(c.node, c.path): c.sample(t) for c in channels}
-        world: dict[int, np.ndarray] = {}
-        for i, parent in self._order:
-            world[i] = self._local(i, animated, T) if parent < 0 else world[parent] @ self._local(i, animated, T)
+        world = self._worlds(animated, T)
         frames = []
         for node, prim in self._prims:
             weights = animated.get((node, "weights"))
@@ -413,6 +427,13 @@ class GltfScene:
                 frames.append(self._skinned(int(skin), prim, p, world))
         out = np.concatenate(frames, axis=1)
         return out[0] if rest else out
+
+    def _worlds(self, animated: dict[tuple[int, str], np.ndarray], T: int) -> dict[int, np.ndarray]:
+        """Every scene node's (T, 4, 4) world matrix, parents first."""
+        world: dict[int, np.ndarray] = {}
+        for i, parent in self._order:
+            world[i] = self._local(i, animated, T) if parent < 0 else world[parent] @ self._local(i, animated, T)
+        return world
 
     def frames(self, fps: float, animation: int | str | None = None) -> np.ndarray:
         """(T, V, 3) vertices sampled at ``fps`` over ``animation`` (default: the first)."""
