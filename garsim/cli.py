@@ -340,21 +340,22 @@ def _read_pinned(path: str) -> object:
     return values.astype(np.int64)
 
 
-def _read_input(path: str, args: argparse.Namespace, attributes: bool = False) -> tuple:
+def _read_input(path: str, args: argparse.Namespace, attributes: bool = False, body: bool = False) -> tuple:
     """A user's mesh file in file order, as ``load_mesh`` (``attributes``: ``load_mesh_with_attributes``) reads it;
-    a USD stage, which declares its axis and unit, brought to ``--up`` / ``--units`` like the other inputs."""
-    from garsim.geometry.io import USD_EXTENSIONS, MeshAttributes, from_internal, load_mesh, load_mesh_with_attributes
+    a USD stage, which declares its axis and unit, brought to ``--up`` / ``--units`` like the other inputs (with
+    ``body``: only its body prim, chosen as for ``--targets``)."""
+    from garsim.geometry.io import USD_EXTENSIONS, from_internal, load_mesh, load_mesh_with_attributes, validate_mesh
 
     if Path(path).suffix.lower() in USD_EXTENSIONS:
-        from garsim.geometry.usd_stage import open_stage, to_z_up_metres
+        from garsim.geometry.usd_stage import read_usd_mesh
 
-        v, f = load_mesh(path)  # checked, in the stage's own axis and unit
-        v = from_internal(to_z_up_metres(open_stage(path)[0], v), args.up, args.units).astype("float32")
-        return (v, f, MeshAttributes()) if attributes else (v, f)
+        v, f, attrs = read_usd_mesh(path, z_up_metres=True, mesh=args.animation if body else None, body=body)
+        v, f = validate_mesh(from_internal(v, args.up, args.units), f, name=str(path))
+        return (v, f, attrs.check(len(f), str(path))) if attributes else (v, f)
     return load_mesh_with_attributes(path) if attributes else load_mesh(path)
 
 
-def _load_targets(src: Path, faces: object, args: argparse.Namespace) -> list:
+def _load_targets(src: Path, canonical: tuple, args: argparse.Namespace) -> list:
     """Target body vertex arrays from a folder of OBJs, an .npz with 'vertices' (T, V, 3), an animated glTF
     sampled at ``--fps``, a USD stage's animated body (its declared axis and unit brought to ``--up`` / ``--units``)
     or a .pc2 point cache; every body must have the canonical body's topology."""
@@ -363,6 +364,7 @@ def _load_targets(src: Path, faces: object, args: argparse.Namespace) -> list:
     from garsim.geometry.io import MeshError, from_internal, load_mesh, load_mesh_animation, natural_order
     from garsim.geometry.usd_stage import USD_EXTENSIONS
 
+    faces = canonical[1]
     ext = src.suffix.lower()
     if args.animation is not None and ext not in (".glb", ".gltf", *USD_EXTENSIONS):
         raise ValueError(f"--animation picks an animation of a .glb/.gltf or a mesh of a USD --targets file, not {src}")
@@ -370,7 +372,7 @@ def _load_targets(src: Path, faces: object, args: argparse.Namespace) -> list:
         if ext in USD_EXTENSIONS:
             from garsim.geometry.usd_stage import load_usd_animation
 
-            frames, f, _ = load_usd_animation(src, args.animation)
+            frames, f, _ = load_usd_animation(src, args.animation, args.fps)
             frames = from_internal(frames, args.up, args.units)
         else:
             frames, f = load_mesh_animation(src, args.fps, args.animation)
@@ -383,12 +385,17 @@ def _load_targets(src: Path, faces: object, args: argparse.Namespace) -> list:
     if ext == ".pc2" and src.is_file():
         from garsim.export import read_pc2
 
-        frames = read_pc2(src)[0]
-        if frames.shape[1] != int(faces.max()) + 1:
+        frames, _, rate = read_pc2(src)
+        if frames.shape[1] != len(canonical[0]):
             raise MeshError(
-                f"{src}: {frames.shape[1]} points per frame, the canonical body has {int(faces.max()) + 1} vertices; "
+                f"{src}: {frames.shape[1]} points per frame, the canonical body has {len(canonical[0])} vertices; "
                 "cache the same body mesh"
             )
+        if rate != 1.0 and len(frames) > 1:  # a sample every `rate` frames: one per frame, linearly between them
+            t = np.arange(0.0, (len(frames) - 1) * rate + 1e-6)
+            k = np.minimum((t / rate).astype(int), len(frames) - 2)
+            u = (t / rate - k)[:, None, None]
+            frames = ((1 - u) * frames[k] + u * frames[k + 1]).astype(np.float32)
         return list(frames)
     if src.is_dir():
         files = natural_order(src.glob("*.obj"))  # frame_2 before frame_10
@@ -503,9 +510,9 @@ def cmd_animate(args: argparse.Namespace) -> int:
         targets = list(from_internal(posed, args.up, args.units))
         rig = BodySkin(body.rest_vertices, body.skin_weights, body.skin_indices, transforms, tuple(body.bone_labels))
     else:
-        canonical = _read_input(args.canonical, args)
+        canonical = _read_input(args.canonical, args, body=True)
         faces = canonical[1]
-        targets = _load_targets(Path(args.targets), faces, args)
+        targets = _load_targets(Path(args.targets), canonical, args)
         rig = None
     sim = GarSim.prior_only() if args.prior_only else GarSim.pretrained()
     frames = sim.drape_sequence(

@@ -242,21 +242,23 @@ def load_obj_folder(path: str | Path, up: str | None = None, units: str | None =
 def load_usd(path: str | Path) -> ViewData:
     """A USD stage: the mesh named ``Garment`` (else the first mesh) and ``Body`` if there is one (as
     :mod:`garsim.export` writes them), their time-sampled or skinned points converted from the stage's upAxis and
-    metersPerUnit to Z-up metres, at the stage's time codes per second (:mod:`garsim.geometry.usd_stage`)."""
-    from garsim.geometry.usd_stage import by_name, mesh_frames, open_stage, to_z_up_metres
+    metersPerUnit to Z-up metres, one frame per time code (:mod:`garsim.geometry.usd_stage`)."""
+    from garsim.geometry.usd_stage import mesh_frames, open_stage, to_z_up_metres
 
     p = Path(path)
     stage, prims = open_stage(p)
-    meshes = by_name(prims)
-    garment = meshes.get("Garment", next(iter(meshes.values())))
-    frames, faces, _ = mesh_frames(stage, garment, p.name)
+    names: dict[str, Any] = {}
+    for prim in prims:
+        names.setdefault(prim.GetName(), prim)
+    garment = names.get("Garment", prims[0])
+    frames, faces = mesh_frames(stage, garment, p.name)
     body = None
-    if "Body" in meshes and meshes["Body"] != garment:
-        body = mesh_frames(stage, meshes["Body"], p.name)[:2]
+    if "Body" in names and names["Body"] != garment:
+        body = mesh_frames(stage, names["Body"], p.name)
     if body is not None and len(body[0]) == 1 < len(frames):  # a body held still
         body = (np.broadcast_to(body[0], (len(frames), *body[0].shape[1:])), body[1])
     elif body is not None and len(body[0]) != len(frames):
-        raise ValueError(f"{p.name}: the Body has {len(body[0])} time samples, the Garment {len(frames)}")
+        raise ValueError(f"{p.name}: the Body has {len(body[0])} frames, the Garment {len(frames)}")
     return ViewData(
         to_z_up_metres(stage, frames),
         faces,

@@ -313,3 +313,38 @@ def test_a_motion_writes_the_body_skinned_to_annys_bones(case, tmp_path, anny_bo
     assert skinned < 0.4 * morph  # 1.6 against 4.6 MB; the morph file grows by 165 kB a frame, the rig by 3 kB
     with pytest.raises(ExportError, match="lies up to"):  # a rig must pose the frames it stands for
         write_gltf_animation(*write[:3], long[::-1], anny_body.faces, body_skin=rig)
+
+
+def test_a_usd_avatar_with_eyes_is_its_own_canonical_body(case, tmp_path):
+    """A stage with an animated Body (its T-pose at time 0, the walk after it, 24 time codes per second) and an Eyes
+    mesh, given as --canonical and --targets: the Body alone is read for both, one frame per time code at --fps 24,
+    and the drape is the one of the same bodies from an .npz."""
+    from pxr import Usd, UsdGeom, Vt
+
+    from garsim.export import read_pc2
+
+    folder, g, canonical, bodies, faces = case
+    stage = Usd.Stage.CreateNew(str(tmp_path / "avatar.usda"))
+    UsdGeom.SetStageUpAxis(stage, UsdGeom.Tokens.z)
+    UsdGeom.SetStageMetersPerUnit(stage, 1.0)  # USD's fallback is centimetres
+    stage.SetTimeCodesPerSecond(24.0)
+    body = UsdGeom.Mesh.Define(stage, "/Avatar/Body")
+    body.CreateFaceVertexCountsAttr([3] * len(faces))
+    body.CreateFaceVertexIndicesAttr(faces.ravel().tolist())
+    sequence = np.concatenate([canonical[None], bodies])
+    for k, b in enumerate(sequence):
+        body.GetPointsAttr().Set(Vt.Vec3fArray.FromNumpy(b.astype("f4")), float(k))
+    eyes = UsdGeom.Mesh.Define(stage, "/Avatar/Eyes")
+    eyes.CreatePointsAttr([(0, -0.1, 1.6), (0.02, -0.1, 1.6), (0, -0.1, 1.62)])
+    eyes.CreateFaceVertexCountsAttr([3])
+    eyes.CreateFaceVertexIndicesAttr([0, 1, 2])
+    stage.GetRootLayer().Save()
+    np.savez(tmp_path / "seq.npz", vertices=sequence)
+    base = ["animate", "--garment", str(folder / "skirt.obj"), "--smoothing", "0", "--quiet", "--prior-only"]
+    usd = ["--canonical", str(tmp_path / "avatar.usda"), "--targets", str(tmp_path / "avatar.usda"), "--fps", "24"]
+    assert main([*base, *usd, "--out", str(tmp_path / "u.pc2")]) == 0
+    npz = ["--canonical", str(folder / "canonical.obj"), "--targets", str(tmp_path / "seq.npz")]
+    assert main([*base, *npz, "--out", str(tmp_path / "n.pc2")]) == 0
+    got, expected = read_pc2(tmp_path / "u.pc2")[0], read_pc2(tmp_path / "n.pc2")[0]
+    assert got.shape == expected.shape == (4, len(g.vertices), 3)
+    np.testing.assert_allclose(got, expected, atol=1e-5)

@@ -269,7 +269,7 @@ _OBJ_V = re.compile(rb"^[ \t\x0b\x0c]*v[ \t]+(\S+)[ \t]+(\S+)[ \t]+(\S+)", re.M)
 _OBJ_F = re.compile(rb"^[ \t\x0b\x0c]*f[ \t]+([^\r\n#]*)", re.M)
 
 
-def _fan_corners(sizes: np.ndarray) -> np.ndarray:
+def fan_corners(sizes: np.ndarray) -> np.ndarray:
     """(T, 3) indices into the flat corner list of polygons with ``sizes`` (each >= 3) corners, fan-triangulated in
     order: a k-corner polygon gives the k - 2 triangles (0, j, j + 1)."""
     start = np.concatenate(([0], np.cumsum(sizes)[:-1]))
@@ -302,7 +302,7 @@ def _read_obj_fast(data: bytes) -> tuple[np.ndarray, np.ndarray] | None:
         faces = _obj_corners(_obj_plain_text(data))[:, :, 0]
         return None if len(faces) == 0 or faces.min() < 0 else (vertices, faces)
     sizes = np.fromiter((len(line) for line in lines), dtype=np.int64, count=len(lines))
-    return vertices, flat[_fan_corners(sizes)] - 1
+    return vertices, flat[fan_corners(sizes)] - 1
 
 
 def _read_file(p: Path) -> bytes:
@@ -542,7 +542,7 @@ def _obj_corners(text: bytes) -> np.ndarray:
         seen = np.stack([np.cumsum(kinds == k) for k in (b"v", b"vt", b"vn")], axis=1)[kinds == b"f"]
         raw = np.where(raw > 0, raw, seen[line_of] + raw + 1)
     idx = np.where(absent, -1, raw - 1)
-    return idx[good[line_of]][_fan_corners(sizes[good])]
+    return idx[good[line_of]][fan_corners(sizes[good])]
 
 
 def _corner_map(src: np.ndarray, dst: np.ndarray) -> np.ndarray | None:
@@ -619,7 +619,7 @@ def _load(path: str | os.PathLike, y_up: bool, attributes: bool) -> tuple[np.nda
     elif ext in USD_EXTENSIONS:
         from garsim.geometry.usd_stage import read_usd_mesh
 
-        plain = read_usd_mesh(p)
+        *plain, usd_attrs = read_usd_mesh(p)
     if plain is not None:
         loaded, (vertices, faces) = None, plain
         if faces.size and faces.max() >= len(vertices):
@@ -661,6 +661,8 @@ def _load(path: str | os.PathLike, y_up: bool, attributes: bool) -> tuple[np.nda
     attrs = MeshAttributes()
     if attributes and ext == ".obj":
         attrs = _read_obj_attributes(data, p, f)
+    elif attributes and ext in USD_EXTENSIONS:
+        attrs = usd_attrs.check(len(f), str(p)) if usd_attrs.uvs is not None else attrs
     elif attributes and ext in (".glb", ".gltf"):
         if scene.uvs is not None:
             uv = scene.uvs.astype(np.float64) * [1.0, -1.0] + [0.0, 1.0]  # glTF's v runs down the image, OBJ's up
