@@ -5,6 +5,7 @@ trimesh's static reading, and read through load_mesh / load_mesh_animation."""
 from __future__ import annotations
 
 import json
+import struct
 from pathlib import Path
 
 import numpy as np
@@ -298,3 +299,18 @@ def test_mirrored_nodes_stitched_strips_partial_uvs_and_float32_key_times(tmp_pa
     frames = scene.frames(24.0)
     assert len(frames) == 51
     np.testing.assert_allclose(frames[-1, 0], [0, 0.5, 0], atol=1e-6)
+
+
+def test_keys_of_another_scenes_nodes_do_not_stretch_the_clip(tmp_path):
+    d = Doc()
+    m = d.mesh([[0.0, 0, 0], [1, 0, 0], [0, 1, 0]], [[0, 1, 2]])
+    shown, other = d.node(mesh=m), d.node(mesh=m)
+    d.animate([(shown, "translation", [0.0, 1.0], [[0, 0, 0], [1, 0, 0]], "LINEAR")])
+    d.animate([(other, "translation", [0.0, 5.0], [[0, 0, 0], [1, 0, 0]], "LINEAR")])
+    second = d.doc["animations"].pop()  # one clip moving a node of this scene and one of another (0 .. 5 s)
+    d.doc["animations"][0]["samplers"].append(second["samplers"][0])
+    d.doc["animations"][0]["channels"].append({"sampler": 1, "target": {"node": other, "path": "translation"}})
+    path = d.write(tmp_path / "two.glb", [shown])
+    assert GltfScene.read(path).duration() == (0.0, 1.0)
+    doc = json.loads(path.read_bytes()[20 : 20 + struct.unpack_from("<I", path.read_bytes(), 12)[0]])
+    assert doc["animations"][0]["channels"][1]["target"]["node"] == other  # the other node's keys are in the file

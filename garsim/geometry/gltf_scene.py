@@ -218,6 +218,7 @@ class GltfScene:
             seen.add(i)
             self._order.append((i, parent))
             stack.extend((int(c), i) for c in reversed(self.nodes[i].get("children", [])))
+        self._in_scene = {i for i, _ in self._order}
         self._prims: list[tuple[int, _Primitive]] = []  # (node, primitive) in scene order
         self.instances: list[GltfInstance] = []
         start = 0
@@ -372,6 +373,8 @@ class GltfScene:
             target = ch.get("target", {})
             if "node" not in target or target.get("path") not in ("translation", "rotation", "scale", "weights"):
                 continue  # pointer or other extension targets move no vertex
+            if int(target["node"]) not in self._in_scene:
+                continue  # a node of another scene: its keys would stretch this scene's clip
             sampler = anim["samplers"][int(ch["sampler"])]
             times = self._accessor(sampler["input"])[:, 0]
             interp = str(sampler.get("interpolation", "LINEAR")).upper()
