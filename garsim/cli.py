@@ -344,14 +344,25 @@ def _read_input(path: str, args: argparse.Namespace, attributes: bool = False, b
     """A user's mesh file in file order, as ``load_mesh`` (``attributes``: ``load_mesh_with_attributes``) reads it;
     a USD stage, which declares its axis and unit, brought to ``--up`` / ``--units`` like the other inputs (with
     ``body``: only its body prim, chosen as for ``--targets``)."""
-    from garsim.geometry.io import USD_EXTENSIONS, from_internal, load_mesh, load_mesh_with_attributes, validate_mesh
+    from garsim.geometry.io import (
+        USD_EXTENSIONS,
+        from_internal,
+        load_mesh,
+        load_mesh_animation,
+        load_mesh_with_attributes,
+        validate_mesh,
+    )
 
-    if Path(path).suffix.lower() in USD_EXTENSIONS:
+    ext = Path(path).suffix.lower()
+    if ext in USD_EXTENSIONS:
         from garsim.geometry.usd_stage import read_usd_mesh
 
-        v, f, attrs = read_usd_mesh(path, z_up_metres=True, mesh=args.animation if body else None, body=body)
+        v, f, attrs = read_usd_mesh(path, z_up_metres=True, mesh=args.body_mesh if body else None, body=body)
         v, f = validate_mesh(from_internal(v, args.up, args.units), f, name=str(path))
         return (v, f, attrs.check(len(f), str(path))) if attributes else (v, f)
+    if body and ext in (".glb", ".gltf"):  # the body mesh, as stored, as the --targets file's frames are read
+        frames, f = load_mesh_animation(path, None, mesh=args.body_mesh)
+        return frames[0], f
     return load_mesh_with_attributes(path) if attributes else load_mesh(path)
 
 
@@ -366,16 +377,18 @@ def _load_targets(src: Path, canonical: tuple, args: argparse.Namespace) -> list
 
     faces = canonical[1]
     ext = src.suffix.lower()
-    if args.animation is not None and ext not in (".glb", ".gltf", *USD_EXTENSIONS):
-        raise ValueError(f"--animation picks an animation of a .glb/.gltf or a mesh of a USD --targets file, not {src}")
+    if args.animation is not None and ext not in (".glb", ".gltf"):
+        raise ValueError(f"--animation picks an animation of a .glb/.gltf --targets file, not of {src}")
+    if args.body_mesh is not None and ext not in (".glb", ".gltf", *USD_EXTENSIONS):
+        raise ValueError(f"--body-mesh picks the body in a .glb/.gltf or USD --targets file, not in {src}")
     if ext in (".glb", ".gltf", *USD_EXTENSIONS) and src.is_file():
         if ext in USD_EXTENSIONS:
             from garsim.geometry.usd_stage import load_usd_animation
 
-            frames, f, _ = load_usd_animation(src, args.animation, args.fps)
+            frames, f, _ = load_usd_animation(src, args.body_mesh, args.fps)
             frames = from_internal(frames, args.up, args.units)
         else:
-            frames, f = load_mesh_animation(src, args.fps, args.animation)
+            frames, f = load_mesh_animation(src, args.fps, args.animation, mesh=args.body_mesh)
         if f.shape != faces.shape or not np.array_equal(f, faces):
             raise MeshError(
                 f"{src}: {frames.shape[1]} vertices, {len(f)} faces: the animated body must have the canonical body's "
@@ -454,8 +467,8 @@ def cmd_animate(args: argparse.Namespace) -> int:
         raise ValueError(f"--frames must be >= 2, got {frames}")
     if args.fps <= 0:
         raise ValueError(f"--fps must be > 0, got {args.fps}")
-    if args.animation is not None and not args.targets:
-        raise ValueError("--animation picks what a .glb/.gltf or USD --targets file animates; give --targets")
+    if (args.animation is not None or args.body_mesh is not None) and not args.targets:
+        raise ValueError("--animation and --body-mesh read a .glb/.gltf or USD --targets file; give --targets")
     if args.interpolate is not None and (not args.poses or args.interpolate < 2):
         raise ValueError("--interpolate N (N >= 2) resamples the keyframes of --poses FILE")
     import numpy as np
@@ -980,10 +993,13 @@ def build_parser() -> argparse.ArgumentParser:
         "its last key), a USD stage (time-sampled points or a UsdSkel skin, one frame per time code, its declared "
         "axis and unit converted to --up/--units) or a .pc2 point cache of the canonical body",
     )
+    p.add_argument("--animation", help="a .glb/.gltf --targets file's animation, by name or index (default: the first)")
     p.add_argument(
-        "--animation",
-        help="a .glb/.gltf --targets file's animation by name or index (default: the first); a USD stage's body "
-        "mesh by prim name (default: Body, or its only mesh)",
+        "--body-mesh",
+        metavar="NAME",
+        help="the body's mesh in a .glb/.gltf or USD --canonical / --targets file that holds several (eyes, hair, a "
+        "garment), by mesh, node or prim name (default: the mesh named Body; else a glTF's every mesh, a USD "
+        "stage's only one)",
     )
     p.add_argument("--fabric", default="cotton", type=fabric_arg, help=FABRIC_HELP)
     p.add_argument(

@@ -277,7 +277,7 @@ def test_animate_reads_its_own_usd_and_pc2_bodies_as_targets(case, tmp_path, cap
     assert main([*base, "--targets", str(tmp_path / "cm.usda"), "--out", str(tmp_path / "cm.pc2")]) == 0
     np.testing.assert_allclose(read_pc2(tmp_path / "cm.pc2")[0], expected, atol=1e-5)
     assert (
-        main([*base, "--targets", str(tmp_path / "a.usdc"), "--animation", "Shirt", "--out", str(tmp_path / "x.pc2")])
+        main([*base, "--targets", str(tmp_path / "a.usdc"), "--body-mesh", "Shirt", "--out", str(tmp_path / "x.pc2")])
         == 2
     )
     assert "no mesh 'Shirt'; the stage has 'Garment', 'Body'" in capsys.readouterr().err
@@ -348,3 +348,28 @@ def test_a_usd_avatar_with_eyes_is_its_own_canonical_body(case, tmp_path):
     got, expected = read_pc2(tmp_path / "u.pc2")[0], read_pc2(tmp_path / "n.pc2")[0]
     assert got.shape == expected.shape == (4, len(g.vertices), 3)
     np.testing.assert_allclose(got, expected, atol=1e-5)
+
+
+def test_a_garsim_walk_glb_is_a_body_source_for_another_garment(case, tmp_path, capsys):
+    """The GLB `animate --motion` writes holds the garment and the skinned body: with --body-mesh Body (the default
+    picks it by name too) its body alone is the canonical (as stored: the walk's first frame) and the targets."""
+    from garsim.geometry.gltf_scene import GltfScene
+    from garsim.geometry.io import load_mesh_animation, y_up_to_z_up
+
+    folder = case[0]
+    walk = tmp_path / "walk.glb"
+    argv = ["animate", "--garment", str(folder / "skirt.obj"), "--motion", "walk", "--frames", "3", "--quiet"]
+    assert main([*argv, "--prior-only", "--out", str(walk)]) == 0
+    frames, faces = load_mesh_animation(walk, 30.0, mesh="Body")
+    assert frames.shape == (3, len(case[2]), 3) and np.array_equal(faces, case[4])
+    scene = GltfScene.read(walk)
+    body = next(i for i in scene.instances if i.name == "Body")
+    np.testing.assert_allclose(
+        load_mesh_animation(walk, None)[0][0], scene.vertices()[body.start : body.stop], atol=1e-6
+    )
+    np.testing.assert_allclose(y_up_to_z_up(frames), case[3], atol=2e-5)
+    with pytest.raises(Exception, match="no mesh 'Hair'"):
+        load_mesh_animation(walk, 30.0, mesh="Hair")
+    bad = ["--canonical", str(folder / "canonical.obj"), "--targets", str(folder / "bodies.npz"), "--body-mesh", "Body"]
+    assert main(["animate", "--garment", str(folder / "skirt.obj"), *bad, "--out", str(tmp_path / "x.pc2")]) == 2
+    assert "--body-mesh picks the body in a .glb/.gltf or USD --targets file" in capsys.readouterr().err

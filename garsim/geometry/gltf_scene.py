@@ -350,6 +350,19 @@ class GltfScene:
         uvs = self._accessor(attrs["TEXCOORD_0"]).astype(np.float64) if "TEXCOORD_0" in attrs else None
         return _Primitive(pos, faces, targets, joints, weights, uvs)
 
+    def body_vertices(self, mesh: str | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """(indices of its vertices in the scene's arrays, its own faces) of the first instance of the mesh named
+        ``mesh`` (a mesh's or its node's name); None: the mesh named ``Body`` if there is one, else every mesh."""
+        if mesh is None and not any("Body" in (i.name, self.nodes[i.node].get("name")) for i in self.instances):
+            return np.arange(self.instances[-1].stop), self.faces
+        name = "Body" if mesh is None else mesh
+        inst = next((i for i in self.instances if name in (i.name, self.nodes[i.node].get("name"))), None)
+        if inst is None:
+            names = sorted({i.name for i in self.instances})
+            raise GltfError(f"{self.name}: no mesh {name!r}; it has {', '.join(map(repr, names))}")
+        own = np.all((self.faces >= inst.start) & (self.faces < inst.stop), axis=1)
+        return np.arange(inst.start, inst.stop), self.faces[own] - inst.start
+
     # ------------------------------------------------------------------ evaluation
 
     def animation_index(self, animation: int | str | None) -> int:

@@ -687,25 +687,29 @@ def _gltf_scene(p: Path) -> GltfScene:
 
 
 def load_mesh_animation(
-    path: str | os.PathLike, fps: float, animation: int | str | None = None, y_up: bool = False
+    path: str | os.PathLike,
+    fps: float | None,
+    animation: int | str | None = None,
+    y_up: bool = False,
+    mesh: str | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """An animated glTF (skin, morph-target weights or node motion) sampled at ``fps`` from its first to its last
-    key -> (float32 frames (T, V, 3), faces), the vertices in :func:`load_mesh`'s order. ``animation``: index or name
-    (default the first); a file without animation gives its one rest frame."""
+    key -> (float32 frames (T, V, 3), faces); ``fps`` None, or a file without animation: its one frame as stored.
+    ``animation``: index or name (default the first); ``mesh``: the body's mesh or node name (default the mesh
+    named ``Body`` if there is one, else every mesh, in :func:`load_mesh`'s order)."""
     p, ext = _check_path(path, writing=False)
     if ext not in (".glb", ".gltf"):
-        raise MeshError(f"{p}: an animated body is read from .glb or .gltf (a folder of OBJs for other formats)")
+        raise MeshError(f"{p}: an animated body is read from .glb or .gltf here (USD: garsim.geometry.usd_stage)")
     scene = _gltf_scene(p)
     try:
-        if scene.animations:
-            frames = scene.frames(fps, animation)
-        elif animation is not None:
-            scene.animation_index(animation)  # raises: no animation
-        else:
-            frames = scene.vertices()[None]
+        index, faces = scene.body_vertices(mesh)
+        if animation is not None:
+            scene.animation_index(animation)  # raises for a file without it
+        frames = scene.frames(fps, animation) if fps is not None and scene.animations else scene.vertices()[None]
     except ValueError as exc:
         raise MeshError(_first_line(exc)) from None
-    _, faces = validate_mesh(frames[0], scene.faces, name=str(p))
+    frames = frames[:, index]
+    _, faces = validate_mesh(frames[0], faces, name=str(p))
     if not np.isfinite(frames).all():
         raise MeshError(f"{p}: the animation gives non-finite vertex positions (broken keys or matrices)")
     frames = frames.astype(np.float32)

@@ -65,7 +65,7 @@ def body_prim(path: str | Path, prims: list[Any], mesh: str | None) -> Any:
         if len(names) == 1:
             return prims[0]
         raise MeshError(
-            f"{path}: the stage holds several meshes ({', '.join(names)}); name the body's prim (CLI: --animation)"
+            f"{path}: the stage holds several meshes ({', '.join(names)}); name the body's prim (CLI: --body-mesh)"
         )
     if mesh not in names:
         raise MeshError(f"{path}: no mesh {mesh!r}; the stage has {', '.join(map(repr, names))}")
