@@ -131,9 +131,27 @@ def user_files(tmp_path_factory, anny_body):
         save_mesh(folder / "bodies" / f"{k:03d}.obj", canonical + t * (target - canonical), body_faces)
     skirt = make_garment("skirt", anny_body, target_vertices=300)
     save_mesh(folder / "skirt.obj", skirt.vertices, skirt.faces)
+    save_mesh(folder / "skirt.glb", skirt.vertices, skirt.faces, y_up=True)
+    _skinned_avatar(folder / "avatar.glb", anny_body)
     keyframes = [{"shoulder_elevation_L": -60, "shoulder_elevation_R": -60}, {"hip_flexion_L": 25}]
     (folder / "keyframes.json").write_text(json.dumps(keyframes))
     return folder
+
+
+def _skinned_avatar(path: Path, body) -> Path:
+    """The default Anny body as a user's avatar: a Y-up GLB skinned to its bones, the T-pose stored, a walk animated."""
+    from gltf_builder import skinned_body
+
+    from garsim.bodies.poses import motion, pose_bodies_rigged
+    from garsim.geometry.io import z_up_to_y_up
+
+    c = np.eye(4)
+    c[:3, :3] = z_up_to_y_up(np.eye(3)).T  # column vectors: p' = c p
+    turn = lambda t: c @ t @ c.T  # noqa: E731 - the same motion in Y-up axes
+    walk = pose_bodies_rigged(body, motion("walk", 3))[1]
+    tpose = pose_bodies_rigged(body, [body.t_pose()])[1][0]
+    rig = (body.skin_weights, body.skin_indices, turn(tpose), turn(walk))
+    return skinned_body(path, z_up_to_y_up(body.rest_vertices), body.faces, *rig)
 
 
 def _outputs(argv: list[str]) -> list[str]:
