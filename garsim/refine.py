@@ -933,9 +933,12 @@ class _State:
         target = (1.0 - _STRETCH_TOL) * bound  # a little inside, so that the passes end with every edge within
         within = (1.0 - 0.5 * _STRETCH_TOL) * bound
         previous, kept, best, since, w = x.copy(), x.copy(), np.inf, 0, 1.0
+        length = np.linalg.norm(x[e[:, 1]] - x[e[:, 0]], axis=1)
+        moving = np.zeros(n, dtype=bool)  # vertices a pass has stepped: they move on (the Chebyshev momentum)
         for k in range(CLAMP_PASSES + 1):
-            dx = x[e[:, 1]] - x[e[:, 0]]
-            length = np.linalg.norm(dx, axis=1)
+            if k:  # only edges at a moving vertex change length: the torn region, not the whole garment
+                touched = np.flatnonzero(moving[e[:, 0]] | moving[e[:, 1]])
+                length[touched] = np.linalg.norm(x[e[touched, 1]] - x[e[touched, 0]], axis=1)
             excess = float(np.maximum(length / within - 1.0, 0.0).sum())  # 0 exactly when every edge is within
             if excess < best:
                 best, kept, since = excess, x.copy(), 0
@@ -945,8 +948,9 @@ class _State:
                 break
             over = length > target
             eo, lo, to = e[over], length[over], target[over]
+            moving[eo.ravel()] = True
             size = (lo - to) / (mob[eo[:, 0]] + mob[eo[:, 1]])  # each mobile end's share of the shortening
-            corr = (size / lo)[:, None] * dx[over]
+            corr = (size / lo)[:, None] * (x[eo[:, 1]] - x[eo[:, 0]])
             step, total = np.zeros((n, 3)), np.zeros(n)
             for end, sign in ((0, 1.0), (1, -1.0)):
                 weight = mob[eo[:, end]] * size
