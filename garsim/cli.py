@@ -394,6 +394,8 @@ def _load_targets(src: Path, canonical: tuple, args: argparse.Namespace) -> list
                 f"{src}: {frames.shape[1]} vertices, {len(f)} faces: the animated body must have the canonical body's "
                 f"topology ({len(faces)} faces) in the same vertex order"
             )
+        if len(frames) == 1:
+            logging.getLogger("garsim").warning("%s: nothing in it moves the body: one target frame, as stored", src)
         return list(frames)
     if ext == ".pc2" and src.is_file():
         from garsim.export import read_pc2

@@ -373,3 +373,17 @@ def test_a_garsim_walk_glb_is_a_body_source_for_another_garment(case, tmp_path, 
     bad = ["--canonical", str(folder / "canonical.obj"), "--targets", str(folder / "bodies.npz"), "--body-mesh", "Body"]
     assert main(["animate", "--garment", str(folder / "skirt.obj"), *bad, "--out", str(tmp_path / "x.pc2")]) == 2
     assert "--body-mesh picks the body in a .glb/.gltf or USD --targets file" in capsys.readouterr().err
+
+
+def test_a_still_gltf_body_gives_one_frame_with_a_warning(case, tmp_path, caplog):
+    from garsim.export import read_pc2
+    from garsim.geometry.io import save_mesh
+
+    folder, g, canonical, bodies, faces = case
+    save_mesh(tmp_path / "still.glb", bodies[1], faces)
+    argv = ["animate", "--garment", str(folder / "skirt.obj"), "--canonical", str(folder / "canonical.obj")]
+    argv += ["--targets", str(tmp_path / "still.glb"), "--prior-only", "--quiet", "--out", str(tmp_path / "s.pc2")]
+    with caplog.at_level("WARNING", logger="garsim"):
+        assert main(argv) == 0
+    assert "nothing in it moves the body: one target frame" in caplog.text
+    np.testing.assert_allclose(read_pc2(tmp_path / "s_body.pc2")[0], bodies[1:2], atol=1e-6)
