@@ -60,6 +60,12 @@ STRAP_CHOICES: tuple[str, ...] = ("band", "crest")
 """``garsim data generate --strap-pins`` (``garsim.physics.generate.STRAP_PINS``, repeated for the same reason)."""
 GROUP_CHOICES: tuple[str, ...] = ("canonical_pose", "construction", "fabric", "family", "paired", "pose_mode")
 """What `garsim eval --by` groups rows by (``garsim.eval.experiments.GROUPS``, repeated for the same reason)."""
+ANIMATION_FPS = 30.0
+"""``garsim animate --fps`` unless a USD ``--targets`` stage gives its own rate."""
+BODY_MESH_HELP = (
+    "the body's mesh in a .glb/.gltf or USD --canonical / {targets} file that holds several (eyes, hair, a garment), "
+    "by mesh, node or prim name (default: the mesh named Body; else a glTF's every mesh, a USD stage's only one)"
+)
 USD_OUTPUTS: tuple[str, ...] = (".usd", ".usda", ".usdc")
 MESH_OUTPUTS: tuple[str, ...] = (".obj", ".ply", ".glb", ".off", ".stl", *USD_OUTPUTS)
 """What ``garsim drape --out`` writes (``garsim.geometry.io.save_mesh``; USD: ``garsim.export``, one frame)."""
@@ -278,16 +284,17 @@ def cmd_drape(args: argparse.Namespace) -> int:
     from garsim.api import GarSim, Scene, from_internal
     from garsim.geometry.io import MeshError, save_mesh
 
-    canonical = _read_input(args.canonical, args)
+    canonical = _read_input(args.canonical, args, body=True, rest=True)
     gv, gf, attributes = _read_input(args.garment, args, attributes=True)  # UVs and normals go to the output
     garment = (gv, gf)
     bodies = []
     for path in targets:  # every target is read and checked before the first drape
-        body = _read_input(path, args)
+        body = _read_input(path, args, body=True)
         if body[0].shape != canonical[0].shape or not np.array_equal(body[1], canonical[1]):
             raise MeshError(
                 f"{path}: {len(body[0])} vertices, {len(body[1])} faces: the target body must have the canonical "
                 f"body's topology ({len(canonical[0])} vertices, {len(canonical[1])} faces); pose the same body mesh"
+                f"{_mesh_choice_hint(path)}"
             )
         bodies.append(body)
     pinned = "auto" if args.pinned == "auto" else _read_pinned(args.pinned) if args.pinned else None
@@ -340,10 +347,14 @@ def _read_pinned(path: str) -> object:
     return values.astype(np.int64)
 
 
-def _read_input(path: str, args: argparse.Namespace, attributes: bool = False, body: bool = False) -> tuple:
+def _read_input(
+    path: str, args: argparse.Namespace, attributes: bool = False, body: bool = False, rest: bool = False
+) -> tuple:
     """A user's mesh file in file order, as ``load_mesh`` (``attributes``: ``load_mesh_with_attributes``) reads it;
-    a USD stage, which declares its axis and unit, brought to ``--up`` / ``--units`` like the other inputs (with
-    ``body``: only its body prim, chosen as for ``--targets``)."""
+    a USD stage, which declares its axis and unit, brought to ``--up`` / ``--units`` like the other inputs. ``body``:
+    a glTF's or USD stage's body mesh alone (``--body-mesh``, else the mesh named Body); ``rest``: a skinned USD body
+    in its skeleton's rest pose (a canonical body), not its animation's first frame (a glTF is read as it stores
+    its nodes)."""
     from garsim.geometry.io import (
         USD_EXTENSIONS,
         from_internal,
@@ -357,13 +368,36 @@ def _read_input(path: str, args: argparse.Namespace, attributes: bool = False, b
     if ext in USD_EXTENSIONS:
         from garsim.geometry.usd_stage import read_usd_mesh
 
-        v, f, attrs = read_usd_mesh(path, z_up_metres=True, mesh=args.body_mesh if body else None, body=body)
+        mesh = args.body_mesh if body else None
+        v, f, attrs = read_usd_mesh(path, z_up_metres=True, mesh=mesh, body=body, rest=rest)
         v, f = validate_mesh(from_internal(v, args.up, args.units), f, name=str(path))
         return (v, f, attrs.check(len(f), str(path))) if attributes else (v, f)
     if body and ext in (".glb", ".gltf"):  # the body mesh, as stored, as the --targets file's frames are read
         frames, f = load_mesh_animation(path, None, mesh=args.body_mesh)
         return frames[0], f
     return load_mesh_with_attributes(path) if attributes else load_mesh(path)
+
+
+def _mesh_choice_hint(path: str | Path) -> str:
+    """'; it holds N meshes (...): ...' for a glTF or USD file of several meshes (a body read with its eyes, hair or
+    garment), else ''."""
+    from garsim.geometry.io import USD_EXTENSIONS
+
+    p = Path(path)
+    if p.suffix.lower() in (".glb", ".gltf"):
+        from garsim.geometry.gltf_scene import GltfScene
+
+        names = [i.name or f"node {i.node}" for i in GltfScene.read(p).instances]
+    elif p.suffix.lower() in USD_EXTENSIONS:
+        from garsim.geometry.usd_stage import open_stage
+
+        names = [prim.GetName() for prim in open_stage(p)[1]]
+    else:
+        return ""
+    if len(names) < 2:
+        return ""
+    listed = ", ".join(names[:6]) + ", ..." * (len(names) > 6)
+    return f"; it holds {len(names)} meshes ({listed}): pick the body with --body-mesh"
 
 
 def _load_targets(src: Path, canonical: tuple, args: argparse.Namespace) -> list:
@@ -392,7 +426,7 @@ def _load_targets(src: Path, canonical: tuple, args: argparse.Namespace) -> list
         if f.shape != faces.shape or not np.array_equal(f, faces):
             raise MeshError(
                 f"{src}: {frames.shape[1]} vertices, {len(f)} faces: the animated body must have the canonical body's "
-                f"topology ({len(faces)} faces) in the same vertex order"
+                f"topology ({len(faces)} faces) in the same vertex order{_mesh_choice_hint(src)}"
             )
         if len(frames) == 1:
             logging.getLogger("garsim").warning("%s: nothing in it moves the body: one target frame, as stored", src)
@@ -460,13 +494,24 @@ def cmd_animate(args: argparse.Namespace) -> int:
     if not sources or (sources == ["--canonical with --targets"] and not (args.canonical and args.targets)):
         raise ValueError(
             "give one of --motion NAME or --poses FILE (the default Anny body), or --canonical and --targets (a "
-            "folder of body OBJs, an .npz with an array 'vertices' of shape (T, V, 3), or an animated .glb/.gltf)"
+            "folder of body OBJs, an .npz with an array 'vertices' of shape (T, V, 3), an animated .glb/.gltf or USD "
+            "stage, or a .pc2)"
         )
     if args.frames is not None and not args.motion:
         raise ValueError("--frames sets the length of a --motion; --poses and --targets give their own frames")
     frames = MOTION_FRAMES if args.frames is None else args.frames
     if args.motion and frames < 2:
         raise ValueError(f"--frames must be >= 2, got {frames}")
+    if args.fps is None:  # a USD stage says its rate; other sources take the default
+        from garsim.geometry.io import USD_EXTENSIONS
+
+        usd = bool(args.targets) and Path(args.targets).suffix.lower() in USD_EXTENSIONS
+        if usd:
+            from garsim.geometry.usd_stage import open_stage
+
+            args.fps = float(open_stage(args.targets)[0].GetTimeCodesPerSecond())
+        else:
+            args.fps = ANIMATION_FPS
     if args.fps <= 0:
         raise ValueError(f"--fps must be > 0, got {args.fps}")
     if (args.animation is not None or args.body_mesh is not None) and not args.targets:
@@ -523,9 +568,12 @@ def cmd_animate(args: argparse.Namespace) -> int:
         canonical = (from_internal(body.canonical().vertices, args.up, args.units), faces)
         posed, transforms = poses.pose_bodies_rigged(body, sequence)
         targets = list(from_internal(posed, args.up, args.units))
-        rig = BodySkin(body.rest_vertices, body.skin_weights, body.skin_indices, transforms, tuple(body.bone_labels))
+        tpose = poses.pose_bodies_rigged(body, [body.t_pose()])[1][0]  # stored: the file is its own canonical body
+        rig = BodySkin(
+            body.rest_vertices, body.skin_weights, body.skin_indices, transforms, tuple(body.bone_labels), tpose
+        )
     else:
-        canonical = _read_input(args.canonical, args, body=True)
+        canonical = _read_input(args.canonical, args, body=True, rest=True)
         faces = canonical[1]
         targets = _load_targets(Path(args.targets), canonical, args)
         rig = None
@@ -923,7 +971,12 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(func=cmd_view)
 
     p = command("drape", "drape a garment mesh from a canonical body onto a target body (or several: batch mode)")
-    p.add_argument("--canonical", required=True, help="canonical body mesh (OBJ/PLY/GLB/OFF/STL)")
+    p.add_argument(
+        "--canonical",
+        required=True,
+        help="canonical body mesh (OBJ/PLY/GLB/glTF/OFF/STL/USD; a skinned USD body in its skeleton's rest pose)",
+    )
+    p.add_argument("--body-mesh", metavar="NAME", help=BODY_MESH_HELP.format(targets="--target"))
     p.add_argument(
         "--target",
         required=True,
@@ -992,17 +1045,12 @@ def build_parser() -> argparse.ArgumentParser:
         "--targets",
         help="folder of target body OBJs (in name order, numbers by value), an .npz with 'vertices' (T, V, 3), a "
         ".glb/.gltf whose body is animated (skin, shape keys or node motion; sampled at --fps from its first to "
-        "its last key), a USD stage (time-sampled points or a UsdSkel skin, one frame per time code, its declared "
-        "axis and unit converted to --up/--units) or a .pc2 point cache of the canonical body",
+        "its last key), a USD stage (time-sampled points, moving transforms or a UsdSkel skin, sampled at --fps, "
+        "by default its own time codes per second; its declared axis and unit converted to --up/--units) or a "
+        ".pc2 point cache of the canonical body",
     )
     p.add_argument("--animation", help="a .glb/.gltf --targets file's animation, by name or index (default: the first)")
-    p.add_argument(
-        "--body-mesh",
-        metavar="NAME",
-        help="the body's mesh in a .glb/.gltf or USD --canonical / --targets file that holds several (eyes, hair, a "
-        "garment), by mesh, node or prim name (default: the mesh named Body; else a glTF's every mesh, a USD "
-        "stage's only one)",
-    )
+    p.add_argument("--body-mesh", metavar="NAME", help=BODY_MESH_HELP.format(targets="--targets"))
     p.add_argument("--fabric", default="cotton", type=fabric_arg, help=FABRIC_HELP)
     p.add_argument(
         "--pinned",
@@ -1025,8 +1073,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument(
         "--fps",
         type=float,
-        default=30.0,
-        help="frames per second of the animation (a .glb/.gltf --targets animation is sampled at this rate)",
+        default=None,
+        help=f"frames per second of the animation, at which a .glb/.gltf or USD --targets animation is sampled "
+        f"(default {ANIMATION_FPS:g}; a USD --targets stage's own time codes per second)",
     )
     p.add_argument("--out", required=True, help=f"output file ({', '.join(ANIMATION_OUTPUTS)})")
     p.add_argument("--prior-only", action="store_true", help="use the skinning prior, not the model")

@@ -928,3 +928,28 @@ def test_drape_reads_and_writes_usd_in_its_declared_axis_and_unit(scene, tmp_pat
     assert UsdGeom.GetStageUpAxis(stage) == UsdGeom.Tokens.z and UsdGeom.GetStageMetersPerUnit(stage) == 0.01
     np.testing.assert_allclose(load_mesh(tmp_path / "d.usdc")[0], 100 * expected, atol=1e-3)
     np.testing.assert_allclose(load_view_data(tmp_path / "d.usdc").frames[0], expected, atol=1e-5)
+
+
+def test_drape_picks_the_body_of_a_multi_mesh_glb(scene, tmp_path, capsys):
+    """A target GLB holding the body and its eyes: the mesh named Body is the target (as with --body-mesh Body);
+    --body-mesh Eyes is refused with the meshes named."""
+    from garsim.geometry.io import load_mesh
+
+    folder, meshes = scene
+    avatar = trimesh.Scene()
+    avatar.add_geometry(meshes["t"], geom_name="Body", node_name="Body")
+    avatar.add_geometry(trimesh.creation.icosphere(subdivisions=1, radius=0.01), geom_name="Eyes", node_name="Eyes")
+    (tmp_path / "avatar.glb").write_bytes(avatar.export(file_type="glb"))
+    argv = ["drape", "--prior-only", "--garment", str(folder / "g.obj"), "--canonical", str(folder / "c.obj")]
+    assert main([*argv, "--target", str(folder / "t.obj"), "--out", str(tmp_path / "obj.obj")]) == 0
+    for extra, name in (([], "a"), (["--body-mesh", "Body"], "b")):
+        assert (
+            main([*argv, "--target", str(tmp_path / "avatar.glb"), *extra, "--out", str(tmp_path / f"{name}.obj")]) == 0
+        )
+        np.testing.assert_allclose(
+            load_mesh(tmp_path / f"{name}.obj")[0], load_mesh(tmp_path / "obj.obj")[0], atol=1e-6
+        )
+    capsys.readouterr()
+    bad = [*argv, "--target", str(tmp_path / "avatar.glb"), "--body-mesh", "Eyes", "--out", str(tmp_path / "e.obj")]
+    assert main(bad) == 2
+    assert "it holds 2 meshes (Body, Eyes): pick the body with --body-mesh" in capsys.readouterr().err

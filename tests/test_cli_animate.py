@@ -317,8 +317,8 @@ def test_a_motion_writes_the_body_skinned_to_annys_bones(case, tmp_path, anny_bo
 
 def test_a_usd_avatar_with_eyes_is_its_own_canonical_body(case, tmp_path):
     """A stage with an animated Body (its T-pose at time 0, the walk after it, 24 time codes per second) and an Eyes
-    mesh, given as --canonical and --targets: the Body alone is read for both, one frame per time code at --fps 24,
-    and the drape is the one of the same bodies from an .npz."""
+    mesh, given as --canonical and --targets: the Body alone is read for both, one frame per time code (--fps
+    defaults to the stage's 24), and the drape is the one of the same bodies from an .npz."""
     from pxr import Usd, UsdGeom, Vt
 
     from garsim.export import read_pc2
@@ -341,7 +341,7 @@ def test_a_usd_avatar_with_eyes_is_its_own_canonical_body(case, tmp_path):
     stage.GetRootLayer().Save()
     np.savez(tmp_path / "seq.npz", vertices=sequence)
     base = ["animate", "--garment", str(folder / "skirt.obj"), "--smoothing", "0", "--quiet", "--prior-only"]
-    usd = ["--canonical", str(tmp_path / "avatar.usda"), "--targets", str(tmp_path / "avatar.usda"), "--fps", "24"]
+    usd = ["--canonical", str(tmp_path / "avatar.usda"), "--targets", str(tmp_path / "avatar.usda")]  # at 24 fps
     assert main([*base, *usd, "--out", str(tmp_path / "u.pc2")]) == 0
     npz = ["--canonical", str(folder / "canonical.obj"), "--targets", str(tmp_path / "seq.npz")]
     assert main([*base, *npz, "--out", str(tmp_path / "n.pc2")]) == 0
@@ -364,9 +364,9 @@ def test_a_garsim_walk_glb_is_a_body_source_for_another_garment(case, tmp_path, 
     assert frames.shape == (3, len(case[2]), 3) and np.array_equal(faces, case[4])
     scene = GltfScene.read(walk)
     body = next(i for i in scene.instances if i.name == "Body")
-    np.testing.assert_allclose(
-        load_mesh_animation(walk, None)[0][0], scene.vertices()[body.start : body.stop], atol=1e-6
-    )
+    stored = load_mesh_animation(walk, None)[0][0]  # as the file stores its nodes: the T-pose the skirt was made on
+    np.testing.assert_allclose(stored, scene.vertices()[body.start : body.stop], atol=1e-6)
+    np.testing.assert_allclose(y_up_to_z_up(stored), case[2], atol=2e-5)
     np.testing.assert_allclose(y_up_to_z_up(frames), case[3], atol=2e-5)
     with pytest.raises(Exception, match="no mesh 'Hair'"):
         load_mesh_animation(walk, 30.0, mesh="Hair")

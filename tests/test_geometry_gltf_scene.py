@@ -15,7 +15,7 @@ from gltf_builder import Doc
 
 from garsim.geometry.gltf_scene import GltfError, GltfScene
 from garsim.geometry.io import MeshError, load_mesh, load_mesh_animation, load_mesh_with_attributes
-from garsim.geometry.usd_stage import load_usd_animation
+from garsim.geometry.usd_stage import load_usd_animation, read_usd_mesh
 
 
 def _z_quat(deg: float) -> list[float]:
@@ -177,6 +177,9 @@ def test_skinning_matches_usdskel_on_a_random_rig(tmp_path):
     stage.GetRootLayer().Export(str(tmp_path / "rig.usda"))
     frames, _, _ = load_usd_animation(tmp_path / "rig.usda")  # its only mesh, skinned by UsdSkel, in metres
     np.testing.assert_allclose(frames, 0.01 * expected, atol=1e-6)
+    at_rest = read_usd_mesh(tmp_path / "rig.usda", z_up_metres=True, rest=True)[0]  # the skeleton's rest pose
+    np.testing.assert_allclose(at_rest, 0.01 * v, atol=1e-6)  # bound at rest: the mesh as stored
+    np.testing.assert_allclose(read_usd_mesh(tmp_path / "rig.usda", z_up_metres=True)[0], frames[0], atol=1e-6)
 
     d = Doc()
     m = d.mesh(v, [[0, 1, 2]], JOINTS_0=d.add(joint_idx, 5123), WEIGHTS_0=d.add(joint_w))

@@ -138,6 +138,9 @@ class BodySkin:
     indices: np.ndarray
     transforms: np.ndarray
     names: tuple[str, ...] = ()
+    stored: np.ndarray | None = None
+    """(J, 4, 4) the bones' transforms the file shows without its animation (the canonical pose the garment was
+    draped in, so that the file can be its own canonical body); None: the first frame's."""
 
     def frames(self) -> np.ndarray:
         """(T, V, 3) posed vertices: sum_k w_k T_{j_k} rest."""
@@ -167,6 +170,10 @@ def _check_skin(skin: BodySkin, body: tuple[np.ndarray, np.ndarray] | None) -> N
             f"body_skin: transforms {t.shape}, rest {np.shape(skin.rest)}, weights {np.shape(skin.weights)}, "
             f"indices {np.shape(skin.indices)} do not fit {body[0].shape[0]} body frames of {body[0].shape[1]} vertices"
         )
+    if skin.stored is not None:
+        if np.shape(skin.stored) != t.shape[1:]:
+            raise ExportError(f"body_skin: stored {np.shape(skin.stored)} does not match the transforms' {t.shape[1:]}")
+        t = np.concatenate([t, np.asarray(skin.stored, dtype=np.float64)[None]])
     r = t[..., :3, :3]
     if np.abs(r @ np.swapaxes(r, -1, -2) - np.eye(3)).max() > 1e-4:
         raise ExportError("body_skin: the bone transforms are not rigid (a glTF joint stores rotation and translation)")
@@ -183,6 +190,8 @@ def _add_skinned_body(b: _Builder, skin: BodySkin, faces: np.ndarray, y_up: bool
     c = z_up_to_y_up(np.eye(3)).T if y_up else np.eye(3)  # column vectors: p' = c p
     rest = np.asarray(skin.rest, dtype=np.float64) @ c.T
     t = np.asarray(skin.transforms, dtype=np.float64)
+    if skin.stored is not None:  # the stored pose first, then the frames
+        t = np.concatenate([np.asarray(skin.stored, dtype=np.float64)[None], t])
     rot = c @ t[..., :3, :3] @ c.T  # the same motion in the file's axes
     trans = t[..., :3, 3] @ c.T
     quats = Rotation.from_matrix(rot.reshape(-1, 3, 3)).as_quat().reshape(*rot.shape[:2], 4)  # (x, y, z, w)
@@ -203,7 +212,10 @@ def _add_skinned_body(b: _Builder, skin: BodySkin, faces: np.ndarray, y_up: bool
         "mode": 4,
         "material": material,
     }
-    return {"name": "Body", "primitives": [primitive]}, [(trans[:, j], quats[:, j]) for j in range(t.shape[1])]
+    first = 1 if skin.stored is not None else 0  # the frames' keys; the node itself keeps row 0
+    return {"name": "Body", "primitives": [primitive]}, [
+        (trans[0, j], quats[0, j], trans[first:, j], quats[first:, j]) for j in range(t.shape[1])
+    ]
 
 
 def _glb(doc: dict, blob: bytes) -> bytes:
@@ -302,10 +314,8 @@ def write_gltf_animation(
     if body is not None and body_skin is not None:
         names = body_skin.names or tuple(f"bone_{j}" for j in range(len(motion)))
         first = len(nodes)
-        for j, (translation, rotation) in enumerate(motion):
-            nodes.append(
-                {"name": str(names[j]), "translation": translation[0].tolist(), "rotation": rotation[0].tolist()}
-            )
+        for j, (t0, q0, translation, rotation) in enumerate(motion):
+            nodes.append({"name": str(names[j]), "translation": t0.tolist(), "rotation": q0.tolist()})
             for path, values in (("translation", translation), ("rotation", rotation)):
                 kind = "VEC3" if path == "translation" else "VEC4"
                 samplers.append(

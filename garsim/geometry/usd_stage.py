@@ -108,8 +108,9 @@ def _world(prim: Any, skinned: tuple[Any, Any, Any] | None, code: Any) -> np.nda
     return np.asarray(xformable.ComputeLocalToWorldTransform(code), dtype=np.float64)
 
 
-def _points(prim: Any, skinned: tuple[Any, Any, Any] | None, code: Any, name: str) -> np.ndarray:
-    """(V, 3) points of a mesh in the stage's frame at one time code."""
+def _points(prim: Any, skinned: tuple[Any, Any, Any] | None, code: Any, name: str, rest: bool = False) -> np.ndarray:
+    """(V, 3) points of a mesh in the stage's frame at one time code; ``rest``: a skinned mesh in its skeleton's rest
+    pose (``restTransforms``), not its animation's."""
     from pxr import UsdGeom, Vt
 
     value = UsdGeom.Mesh(prim).GetPointsAttr().Get(code)
@@ -118,8 +119,14 @@ def _points(prim: Any, skinned: tuple[Any, Any, Any] | None, code: Any, name: st
     p = np.asarray(value, dtype=np.float64)
     if skinned is not None:
         skin, skel_query, _ = skinned
+        if rest:  # UsdSkel's skinning transforms, inverse(bind) * skel-space joint, with the joints at rest
+            at_rest = skel_query.ComputeJointSkelTransforms(code, True)
+            bind = skel_query.GetJointWorldBindTransforms()
+            xforms = Vt.Matrix4dArray([b.GetInverse() * j for b, j in zip(bind, at_rest)])
+        else:
+            xforms = skel_query.ComputeSkinningTransforms(code)
         out = Vt.Vec3fArray.FromNumpy(p.astype(np.float32))
-        if not skin.ComputeSkinnedPoints(skel_query.ComputeSkinningTransforms(code), out, code):
+        if not skin.ComputeSkinnedPoints(xforms, out, code):
             raise MeshError(f"{name}: USD could not skin {prim.GetPath()}")
         p = np.asarray(out, dtype=np.float64)
     world = _world(prim, skinned, code)
@@ -202,11 +209,12 @@ def mesh_frames(stage: Any, prim: Any, name: str, fps: float | None = None) -> t
 
 
 def read_usd_mesh(
-    path: str | Path, z_up_metres: bool = False, mesh: str | None = None, body: bool = False
+    path: str | Path, z_up_metres: bool = False, mesh: str | None = None, body: bool = False, rest: bool = False
 ) -> tuple[np.ndarray, np.ndarray, MeshAttributes]:
     """The stage's shown meshes at its earliest time (skins applied), concatenated in traversal order, or with
     ``body`` only its body prim (:func:`body_prim` with ``mesh``) -> (vertices, faces, UVs per corner where every mesh
-    has ``st``), in the stage's own axis and unit, or in garsim's Z-up metres with ``z_up_metres``."""
+    has ``st``), in the stage's own axis and unit, or in garsim's Z-up metres with ``z_up_metres``. ``rest``: skinned
+    meshes in their skeleton's rest pose (an avatar's canonical pose, not its animation's first frame)."""
     from pxr import Usd
 
     p = Path(path)
@@ -216,7 +224,7 @@ def read_usd_mesh(
     vertices, faces, uvs, uv_faces, offset, uv_offset = [], [], [], [], 0, 0
     for prim in prims:
         skinned = _skinning(prim)
-        v = _points(prim, skinned, Usd.TimeCode.EarliestTime(), p.name)
+        v = _points(prim, skinned, Usd.TimeCode.EarliestTime(), p.name, rest)
         f, corners = _topology(prim, skinned, p.name)
         if f.size and f.max() >= len(v):
             raise MeshError(f"{p}: {prim.GetPath()}'s faces index point {int(f.max())} of {len(v)}")
