@@ -66,6 +66,10 @@ BODY_MESH_HELP = (
     "the body's mesh in a .glb/.gltf or USD --canonical / {targets} file that holds several (eyes, hair, a garment), "
     "by mesh, node or prim name (default: the mesh named Body; else a glTF's every mesh, a USD stage's only one)"
 )
+GARMENT_MESH_HELP = (
+    "the garment's mesh in a .glb/.gltf or USD --garment file that also holds the avatar or other pieces, by mesh, "
+    "node or prim name (default: every mesh of the file)"
+)
 USD_OUTPUTS: tuple[str, ...] = (".usd", ".usda", ".usdc")
 MESH_OUTPUTS: tuple[str, ...] = (".obj", ".ply", ".glb", ".off", ".stl", *USD_OUTPUTS)
 """What ``garsim drape --out`` writes (``garsim.geometry.io.save_mesh``; USD: ``garsim.export``, one frame)."""
@@ -285,7 +289,7 @@ def cmd_drape(args: argparse.Namespace) -> int:
     from garsim.geometry.io import MeshError, save_mesh
 
     canonical = _read_input(args.canonical, args, body=True, rest=True)
-    gv, gf, attributes = _read_input(args.garment, args, attributes=True)  # UVs and normals go to the output
+    gv, gf, attributes = _read_garment(args)  # UVs and normals go to the output
     garment = (gv, gf)
     bodies = []
     for path in targets:  # every target is read and checked before the first drape
@@ -348,39 +352,46 @@ def _read_pinned(path: str) -> object:
 
 
 def _read_input(
-    path: str, args: argparse.Namespace, attributes: bool = False, body: bool = False, rest: bool = False
+    path: str,
+    args: argparse.Namespace,
+    attributes: bool = False,
+    body: bool = False,
+    rest: bool = False,
+    pick: str | None = None,
 ) -> tuple:
     """A user's mesh file in file order, as ``load_mesh`` (``attributes``: ``load_mesh_with_attributes``) reads it;
     a USD stage, which declares its axis and unit, brought to ``--up`` / ``--units`` like the other inputs. ``body``:
     a glTF's or USD stage's body mesh alone (``--body-mesh``, else the mesh named Body); ``rest``: a skinned USD body
     in its skeleton's rest pose (a canonical body), not its animation's first frame (a glTF is read as it stores
-    its nodes)."""
+    its nodes). ``pick``: the mesh of that name alone (a garment exported with its avatar)."""
     from garsim.geometry.io import (
         USD_EXTENSIONS,
         from_internal,
+        load_gltf_mesh,
         load_mesh,
-        load_mesh_animation,
         load_mesh_with_attributes,
         validate_mesh,
     )
 
     ext = Path(path).suffix.lower()
+    if pick is not None and ext not in (".glb", ".gltf", *USD_EXTENSIONS):
+        raise ValueError(f"{path}: a mesh is picked by name (--garment-mesh {pick}) from a .glb/.gltf or USD file")
     if ext in USD_EXTENSIONS:
         from garsim.geometry.usd_stage import read_usd_mesh
 
-        mesh = args.body_mesh if body else None
-        v, f, attrs = read_usd_mesh(path, z_up_metres=True, mesh=mesh, body=body, rest=rest)
+        mesh = args.body_mesh if body else pick
+        v, f, attrs = read_usd_mesh(path, z_up_metres=True, mesh=mesh, body=body or pick is not None, rest=rest)
         v, f = validate_mesh(from_internal(v, args.up, args.units), f, name=str(path))
         return (v, f, attrs.check(len(f), str(path))) if attributes else (v, f)
-    if body and ext in (".glb", ".gltf"):  # the body mesh, as stored, as the --targets file's frames are read
-        frames, f = load_mesh_animation(path, None, mesh=args.body_mesh)
-        return frames[0], f
+    if (body or pick is not None) and ext in (".glb", ".gltf"):  # one mesh as stored, as --targets frames are read
+        v, f, attrs = load_gltf_mesh(path, args.body_mesh if body else pick)
+        return (v, f, attrs) if attributes else (v, f)
     return load_mesh_with_attributes(path) if attributes else load_mesh(path)
 
 
-def _mesh_choice_hint(path: str | Path) -> str:
-    """'; it holds N meshes (...): ...' for a glTF or USD file of several meshes (a body read with its eyes, hair or
-    garment), else ''."""
+def _mesh_choice_hint(path: str | Path, flag: str = "--body-mesh", what: str = "the body") -> str:
+    """'; it holds N meshes (...): pick <what> with <flag>' for a glTF or USD file of several meshes (a body read
+    with its eyes, hair or garment; a garment with its avatar), else ''."""
     from garsim.geometry.io import USD_EXTENSIONS
 
     p = Path(path)
@@ -391,13 +402,24 @@ def _mesh_choice_hint(path: str | Path) -> str:
     elif p.suffix.lower() in USD_EXTENSIONS:
         from garsim.geometry.usd_stage import open_stage
 
-        names = [prim.GetName() for prim in open_stage(p)[1]]
+        stage, prims = open_stage(p)  # the stage must outlive its prims
+        names = [prim.GetName() for prim in prims]
     else:
         return ""
     if len(names) < 2:
         return ""
     listed = ", ".join(names[:6]) + ", ..." * (len(names) > 6)
-    return f"; it holds {len(names)} meshes ({listed}): pick the body with --body-mesh"
+    return f"; it holds {len(names)} meshes ({listed}): pick {what} with {flag}"
+
+
+def _read_garment(args: argparse.Namespace) -> tuple:
+    """The --garment file's mesh (--garment-mesh, else all of it, with a warning when a glTF or USD file holds
+    several meshes) with its surface attributes."""
+    garment = _read_input(args.garment, args, attributes=True, pick=args.garment_mesh)
+    hint = "" if args.garment_mesh is not None else _mesh_choice_hint(args.garment, "--garment-mesh", "the garment")
+    if hint:
+        logging.getLogger("garsim").warning("%s: draped as one garment%s", args.garment, hint)
+    return garment
 
 
 def _load_targets(src: Path, canonical: tuple, args: argparse.Namespace) -> list:
@@ -542,7 +564,7 @@ def cmd_animate(args: argparse.Namespace) -> int:
     fabric_fields(args.fabric)
     smoothing = check_smoothing(SequenceConfig.smoothing if args.smoothing is None else args.smoothing)
     pinned = "auto" if args.pinned == "auto" else _read_pinned(args.pinned) if args.pinned else None
-    gv, gf, attributes = _read_input(args.garment, args, attributes=True)
+    gv, gf, attributes = _read_garment(args)
     garment = (gv, gf)
     uvs = attributes.vertex_uvs(gf, len(gv))  # the animation formats store one UV per vertex
     if uvs is None and attributes.uvs is not None:
@@ -977,6 +999,7 @@ def build_parser() -> argparse.ArgumentParser:
         help="canonical body mesh (OBJ/PLY/GLB/glTF/OFF/STL/USD; a skinned USD body in its skeleton's rest pose)",
     )
     p.add_argument("--body-mesh", metavar="NAME", help=BODY_MESH_HELP.format(targets="--target"))
+    p.add_argument("--garment-mesh", metavar="NAME", help=GARMENT_MESH_HELP)
     p.add_argument(
         "--target",
         required=True,
@@ -1051,6 +1074,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument("--animation", help="a .glb/.gltf --targets file's animation, by name or index (default: the first)")
     p.add_argument("--body-mesh", metavar="NAME", help=BODY_MESH_HELP.format(targets="--targets"))
+    p.add_argument("--garment-mesh", metavar="NAME", help=GARMENT_MESH_HELP)
     p.add_argument("--fabric", default="cotton", type=fabric_arg, help=FABRIC_HELP)
     p.add_argument(
         "--pinned",

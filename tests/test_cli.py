@@ -953,3 +953,27 @@ def test_drape_picks_the_body_of_a_multi_mesh_glb(scene, tmp_path, capsys):
     bad = [*argv, "--target", str(tmp_path / "avatar.glb"), "--body-mesh", "Eyes", "--out", str(tmp_path / "e.obj")]
     assert main(bad) == 2
     assert "it holds 2 meshes (Body, Eyes): pick the body with --body-mesh" in capsys.readouterr().err
+
+
+def test_drape_picks_the_garment_of_a_glb_that_holds_the_avatar_too(scene, tmp_path, caplog):
+    """A garment exported with its avatar (one GLB, two meshes): --garment-mesh Skirt drapes the skirt alone, like its
+    own file; without the flag the file is draped as one garment, with a warning that names its meshes."""
+    from garsim.geometry.io import load_mesh
+
+    folder, meshes = scene
+    outfit = trimesh.Scene()
+    outfit.add_geometry(meshes["g"], geom_name="Skirt", node_name="Skirt")
+    outfit.add_geometry(meshes["c"], geom_name="Avatar", node_name="Avatar")
+    (tmp_path / "outfit.glb").write_bytes(outfit.export(file_type="glb"))
+    argv = ["drape", "--prior-only", "--canonical", str(folder / "c.obj"), "--target", str(folder / "t.obj")]
+    assert main([*argv, "--garment", str(folder / "g.obj"), "--out", str(tmp_path / "own.obj")]) == 0
+    picked = [*argv, "--garment", str(tmp_path / "outfit.glb"), "--garment-mesh", "Skirt"]
+    assert main([*picked, "--out", str(tmp_path / "picked.obj")]) == 0
+    np.testing.assert_allclose(load_mesh(tmp_path / "picked.obj")[0], load_mesh(tmp_path / "own.obj")[0], atol=1e-6)
+    with caplog.at_level("WARNING", logger="garsim"):
+        main([*argv, "--garment", str(tmp_path / "outfit.glb"), "--out", str(tmp_path / "all.obj")])
+    assert "it holds 2 meshes (Skirt, Avatar): pick the garment with --garment-mesh" in caplog.text
+    assert (
+        main([*argv, "--garment", str(folder / "g.obj"), "--garment-mesh", "Skirt", "--out", str(tmp_path / "x.obj")])
+        == 2
+    )

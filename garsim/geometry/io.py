@@ -664,9 +664,7 @@ def _load(path: str | os.PathLike, y_up: bool, attributes: bool) -> tuple[np.nda
     elif attributes and ext in USD_EXTENSIONS:
         attrs = usd_attrs.check(len(f), str(p)) if usd_attrs.uvs is not None else attrs
     elif attributes and ext in (".glb", ".gltf"):
-        if scene.uvs is not None:
-            uv = scene.uvs.astype(np.float64) * [1.0, -1.0] + [0.0, 1.0]  # glTF's v runs down the image, OBJ's up
-            attrs = MeshAttributes(uvs=uv, uv_faces=f.copy())
+        attrs = _gltf_uvs(scene.uvs, f)
     elif attributes and ext != ".stl":
         uv = getattr(getattr(loaded, "visual", None), "uv", None)
         if uv is not None and np.shape(uv) == (len(v), 2) and np.isfinite(uv).all():
@@ -684,6 +682,28 @@ def _gltf_scene(p: Path) -> GltfScene:
         raise MeshError(_first_line(exc)) from None
     except OSError as exc:
         raise MeshError(f"{p}: cannot read the file ({_first_line(exc)})") from None
+
+
+def load_gltf_mesh(path: str | os.PathLike, mesh: str | None) -> tuple[np.ndarray, np.ndarray, MeshAttributes]:
+    """One mesh of a glTF file as stored (``mesh``: its mesh or node name; None: the mesh named ``Body``, else every
+    mesh) -> validated (vertices, faces, its UVs in OBJ's convention when it has them)."""
+    p, ext = _check_path(path, writing=False)
+    if ext not in (".glb", ".gltf"):
+        raise MeshError(f"{p}: a mesh is picked by name from a .glb or .gltf (or a USD stage)")
+    scene = _gltf_scene(p)
+    try:
+        index, faces = scene.body_vertices(mesh)
+    except ValueError as exc:
+        raise MeshError(_first_line(exc)) from None
+    v, f = validate_mesh(scene.vertices()[index], faces, name=str(p))
+    return v, f, _gltf_uvs(None if scene.uvs is None else scene.uvs[index], f)
+
+
+def _gltf_uvs(uvs: np.ndarray | None, faces: np.ndarray) -> MeshAttributes:
+    """A glTF's per-vertex TEXCOORD_0 as attributes in OBJ's convention (glTF's v runs down the image, OBJ's up)."""
+    if uvs is None:
+        return MeshAttributes()
+    return MeshAttributes(uvs=np.asarray(uvs, dtype=np.float64) * [1.0, -1.0] + [0.0, 1.0], uv_faces=faces.copy())
 
 
 def load_mesh_animation(
