@@ -687,16 +687,21 @@ def _gltf_scene(p: Path) -> GltfScene:
 def load_gltf_mesh(path: str | os.PathLike, mesh: str | None) -> tuple[np.ndarray, np.ndarray, MeshAttributes]:
     """One mesh of a glTF file as stored (``mesh``: its mesh or node name; None: the mesh named ``Body``, else every
     mesh) -> validated (vertices, faces, its UVs in OBJ's convention when it has them)."""
-    p, ext = _check_path(path, writing=False)
-    if ext not in (".glb", ".gltf"):
-        raise MeshError(f"{p}: a mesh is picked by name from a .glb or .gltf (or a USD stage)")
-    scene = _gltf_scene(p)
-    try:
-        index, faces = scene.body_vertices(mesh)
-    except ValueError as exc:
-        raise MeshError(_first_line(exc)) from None
+    p, scene, index, faces = _gltf_part(path, mesh)
     v, f = validate_mesh(scene.vertices()[index], faces, name=str(p))
     return v, f, _gltf_uvs(None if scene.uvs is None else scene.uvs[index], f)
+
+
+def _gltf_part(path: str | os.PathLike, mesh: str | None) -> tuple[Path, GltfScene, np.ndarray, np.ndarray]:
+    """(path, scene, the vertex indices and own faces of its mesh ``mesh``) of a .glb / .gltf file."""
+    p, ext = _check_path(path, writing=False)
+    if ext not in (".glb", ".gltf"):
+        raise MeshError(f"{p}: a mesh is picked, or an animation read, from a .glb or .gltf here (USD: usd_stage)")
+    scene = _gltf_scene(p)
+    try:
+        return (p, scene, *scene.body_vertices(mesh))
+    except ValueError as exc:
+        raise MeshError(_first_line(exc)) from None
 
 
 def _gltf_uvs(uvs: np.ndarray | None, faces: np.ndarray) -> MeshAttributes:
@@ -717,12 +722,8 @@ def load_mesh_animation(
     key -> (float32 frames (T, V, 3), faces); ``fps`` None, or a file without animation: its one frame as stored.
     ``animation``: index or name (default the first); ``mesh``: the body's mesh or node name (default the mesh
     named ``Body`` if there is one, else every mesh, in :func:`load_mesh`'s order)."""
-    p, ext = _check_path(path, writing=False)
-    if ext not in (".glb", ".gltf"):
-        raise MeshError(f"{p}: an animated body is read from .glb or .gltf here (USD: garsim.geometry.usd_stage)")
-    scene = _gltf_scene(p)
+    p, scene, index, faces = _gltf_part(path, mesh)
     try:
-        index, faces = scene.body_vertices(mesh)
         if animation is not None:
             scene.animation_index(animation)  # raises for a file without it
         frames = scene.frames(fps, animation) if fps is not None and scene.animations else scene.vertices()[None]
