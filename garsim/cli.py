@@ -422,15 +422,23 @@ def _read_garment(args: argparse.Namespace) -> tuple:
     return garment
 
 
-def _load_targets(src: Path, canonical: tuple, args: argparse.Namespace) -> list:
-    """Target body vertex arrays from a folder of OBJs, an .npz with 'vertices' (T, V, 3), an animated glTF
-    sampled at ``--fps``, a USD stage's animated body (its declared axis and unit brought to ``--up`` / ``--units``)
-    or a .pc2 point cache; every body must have the canonical body's topology."""
+def _load_targets(src: Path, canonical: tuple, args: argparse.Namespace) -> tuple[list, float]:
+    """(target body vertex arrays, frames per second) from a folder of OBJs, an .npz with 'vertices' (T, V, 3), an
+    animated glTF sampled at ``--fps``, a USD stage's animated body (sampled at ``--fps``, by default its own rate;
+    its declared axis and unit brought to ``--up`` / ``--units``) or a .pc2 point cache; every body must have the
+    canonical body's topology."""
     import numpy as np
 
-    from garsim.geometry.io import MeshError, from_internal, load_mesh, load_mesh_animation, natural_order
-    from garsim.geometry.usd_stage import USD_EXTENSIONS
+    from garsim.geometry.io import (
+        USD_EXTENSIONS,
+        MeshError,
+        from_internal,
+        load_mesh,
+        load_mesh_animation,
+        natural_order,
+    )
 
+    fps = ANIMATION_FPS if args.fps is None else args.fps
     faces = canonical[1]
     ext = src.suffix.lower()
     if args.animation is not None and ext not in (".glb", ".gltf"):
@@ -441,10 +449,10 @@ def _load_targets(src: Path, canonical: tuple, args: argparse.Namespace) -> list
         if ext in USD_EXTENSIONS:
             from garsim.geometry.usd_stage import load_usd_animation
 
-            frames, f, _ = load_usd_animation(src, args.body_mesh, args.fps)
+            frames, f, fps = load_usd_animation(src, args.body_mesh, args.fps)
             frames = from_internal(frames, args.up, args.units)
         else:
-            frames, f = load_mesh_animation(src, args.fps, args.animation, mesh=args.body_mesh)
+            frames, f = load_mesh_animation(src, fps, args.animation, mesh=args.body_mesh)
         if f.shape != faces.shape or not np.array_equal(f, faces):
             raise MeshError(
                 f"{src}: {frames.shape[1]} vertices, {len(f)} faces: the animated body must have the canonical body's "
@@ -452,7 +460,7 @@ def _load_targets(src: Path, canonical: tuple, args: argparse.Namespace) -> list
             )
         if len(frames) == 1:
             logging.getLogger("garsim").warning("%s: nothing in it moves the body: one target frame, as stored", src)
-        return list(frames)
+        return list(frames), fps
     if ext == ".pc2" and src.is_file():
         from garsim.export import read_pc2
 
@@ -467,7 +475,7 @@ def _load_targets(src: Path, canonical: tuple, args: argparse.Namespace) -> list
             k = np.minimum((t / rate).astype(int), len(frames) - 2)
             u = (t / rate - k)[:, None, None]
             frames = ((1 - u) * frames[k] + u * frames[k + 1]).astype(np.float32)
-        return list(frames)
+        return list(frames), fps
     if src.is_dir():
         files = natural_order(src.glob("*.obj"))  # frame_2 before frame_10
         if not files:
@@ -481,7 +489,7 @@ def _load_targets(src: Path, canonical: tuple, args: argparse.Namespace) -> list
                     f"topology ({len(faces)} faces); pose the same body mesh"
                 )
             targets.append(v)
-        return targets
+        return targets, fps
     if not src.is_file():
         raise ValueError(f"--targets {src}: no such file or folder")
     if src.suffix.lower() != ".npz":
@@ -503,7 +511,7 @@ def _load_targets(src: Path, canonical: tuple, args: argparse.Namespace) -> list
         raise ValueError(f"--targets {src}: not a readable .npz ({type(exc).__name__}: {exc})") from None
     if targets.ndim != 3 or targets.shape[-1] != 3 or len(targets) == 0:
         raise ValueError(f"--targets {src}: 'vertices' must have shape (T, V, 3) with T >= 1, got {targets.shape}")
-    return list(targets)
+    return list(targets), fps
 
 
 def cmd_animate(args: argparse.Namespace) -> int:
@@ -524,17 +532,7 @@ def cmd_animate(args: argparse.Namespace) -> int:
     frames = MOTION_FRAMES if args.frames is None else args.frames
     if args.motion and frames < 2:
         raise ValueError(f"--frames must be >= 2, got {frames}")
-    if args.fps is None:  # a USD stage says its rate; other sources take the default
-        from garsim.geometry.io import USD_EXTENSIONS
-
-        usd = bool(args.targets) and Path(args.targets).suffix.lower() in USD_EXTENSIONS
-        if usd:
-            from garsim.geometry.usd_stage import open_stage
-
-            args.fps = float(open_stage(args.targets)[0].GetTimeCodesPerSecond())
-        else:
-            args.fps = ANIMATION_FPS
-    if args.fps <= 0:
+    if args.fps is not None and args.fps <= 0:
         raise ValueError(f"--fps must be > 0, got {args.fps}")
     if (args.animation is not None or args.body_mesh is not None) and not args.targets:
         raise ValueError("--animation and --body-mesh read a .glb/.gltf or USD --targets file; give --targets")
@@ -594,10 +592,11 @@ def cmd_animate(args: argparse.Namespace) -> int:
         rig = BodySkin(
             body.rest_vertices, body.skin_weights, body.skin_indices, transforms, tuple(body.bone_labels), tpose
         )
+        fps = ANIMATION_FPS if args.fps is None else args.fps
     else:
         canonical = _read_input(args.canonical, args, body=True, rest=True)
         faces = canonical[1]
-        targets = _load_targets(Path(args.targets), canonical, args)
+        targets, fps = _load_targets(Path(args.targets), canonical, args)
         rig = None
     sim = GarSim.prior_only() if args.prior_only else GarSim.pretrained()
     frames = sim.drape_sequence(
@@ -619,7 +618,7 @@ def cmd_animate(args: argparse.Namespace) -> int:
             canonical, targets, garment, fabric=args.fabric, pinned=pinned, up=args.up, units=args.units
         )
         internal = [to_internal(a, args.up, args.units) for a in (frames, np.stack(targets), prior)]
-        view = ViewData(internal[0], gf, internal[1], faces, internal[2], fps=args.fps, name=out.name)
+        view = ViewData(internal[0], gf, internal[1], faces, internal[2], fps=fps, name=out.name)
         print(view.save_npz(out))
         return 0
     extra = {} if uvs is None else {"uvs": uvs}
@@ -643,7 +642,7 @@ def cmd_animate(args: argparse.Namespace) -> int:
         units=args.units,
         body_frames=np.stack(targets),
         body_faces=faces,
-        fps=args.fps,
+        fps=fps,
         body_skin=rig,  # an Anny body goes into a glTF skinned to its bones
         **extra,
     )

@@ -143,8 +143,8 @@ def load_gltf(path: str | Path) -> ViewData:
         verts = y_up_to_z_up(verts)
     out: dict[str, tuple[np.ndarray, np.ndarray]] = {}
     for role, inst in roles.items():
-        own = np.all((scene.faces >= inst.start) & (scene.faces < inst.stop), axis=1)
-        out[role] = verts[:, inst.start : inst.stop].astype(np.float32), scene.faces[own] - inst.start
+        index, faces = scene.instance_part(inst)
+        out[role] = verts[:, index].astype(np.float32), faces
     frames, faces = out["garment"]
     body = out.get("body")
     prior = out.get("prior")

@@ -354,7 +354,7 @@ def test_a_garsim_walk_glb_is_a_body_source_for_another_garment(case, tmp_path, 
     """The GLB `animate --motion` writes holds the garment and the skinned body: with --body-mesh Body (the default
     picks it by name too) its body alone is the canonical (as stored: the walk's first frame) and the targets."""
     from garsim.geometry.gltf_scene import GltfScene
-    from garsim.geometry.io import load_mesh_animation, y_up_to_z_up
+    from garsim.geometry.io import MeshError, load_mesh_animation, y_up_to_z_up
 
     folder = case[0]
     walk = tmp_path / "walk.glb"
@@ -368,7 +368,7 @@ def test_a_garsim_walk_glb_is_a_body_source_for_another_garment(case, tmp_path, 
     np.testing.assert_allclose(stored, scene.vertices()[body.start : body.stop], atol=1e-6)
     np.testing.assert_allclose(y_up_to_z_up(stored), case[2], atol=2e-5)
     np.testing.assert_allclose(y_up_to_z_up(frames), case[3], atol=2e-5)
-    with pytest.raises(Exception, match="no mesh 'Hair'"):
+    with pytest.raises(MeshError, match="no mesh 'Hair'"):
         load_mesh_animation(walk, 30.0, mesh="Hair")
     bad = ["--canonical", str(folder / "canonical.obj"), "--targets", str(folder / "bodies.npz"), "--body-mesh", "Body"]
     assert main(["animate", "--garment", str(folder / "skirt.obj"), *bad, "--out", str(tmp_path / "x.pc2")]) == 2

@@ -144,12 +144,12 @@ class BodySkin:
 
     def frames(self) -> np.ndarray:
         """(T, V, 3) posed vertices: sum_k w_k T_{j_k} rest."""
+        from garsim.geometry.skinning import apply_transforms, blended_transforms, dense_weights
+
         rest = np.asarray(self.rest, dtype=np.float64)
-        out = np.empty((len(self.transforms), len(rest), 3))
-        for t, mats in enumerate(np.asarray(self.transforms, dtype=np.float64)):
-            blend = np.einsum("vk,vkij->vij", self.weights, mats[self.indices][:, :, :3])
-            out[t] = np.einsum("vij,vj->vi", blend[..., :3], rest) + blend[..., 3]
-        return out
+        transforms = np.asarray(self.transforms, dtype=np.float64)
+        dense = dense_weights(np.asarray(self.indices), np.asarray(self.weights), transforms.shape[1])
+        return np.stack([apply_transforms(rest, blended_transforms(dense, t)) for t in transforms])
 
 
 def _check_skin(skin: BodySkin, body: tuple[np.ndarray, np.ndarray] | None) -> None:

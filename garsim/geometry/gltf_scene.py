@@ -49,10 +49,8 @@ def _first_line(exc: BaseException) -> str:
     return text.splitlines()[0] if text else type(exc).__name__
 
 
-def read_gltf_document(path: Path, buffer: bool = True) -> tuple[dict, bytes]:
-    """(the JSON document, the first buffer's bytes) of a .glb or .gltf; ``buffer=False``: the document alone.
-    Raises GltfError for a file that is not one, or whose buffer cannot be read."""
-    path = Path(path)
+def _read_container(path: Path) -> tuple[dict, bytes]:
+    """(the JSON document, the GLB's binary chunk, empty for a .gltf) of a glTF file; GltfError for one that is not."""
     data = path.read_bytes()
     if path.suffix.lower() == ".gltf":
         try:
@@ -61,7 +59,7 @@ def read_gltf_document(path: Path, buffer: bool = True) -> tuple[dict, bytes]:
             raise GltfError(f"{path}: not a glTF document ({_first_line(exc)})") from None
         if not isinstance(doc, dict):
             raise GltfError(f"{path}: not a glTF document (the JSON is not an object)")
-        return doc, (_buffer(path, doc, 0, b"") if buffer and doc.get("buffers") else b"")
+        return doc, b""
     if len(data) < 20:
         raise GltfError(f"{path}: not a GLB file (too short)")
     magic, version, total = struct.unpack_from("<III", data, 0)
@@ -78,7 +76,7 @@ def read_gltf_document(path: Path, buffer: bool = True) -> tuple[dict, bytes]:
     if 28 + json_len <= len(data):
         bin_len, _ = struct.unpack_from("<II", data, 20 + json_len)
         chunk = data[28 + json_len : 28 + json_len + bin_len]
-    return doc, (_buffer(path, doc, 0, chunk) if buffer and doc.get("buffers") else b"")
+    return doc, chunk
 
 
 def _buffer(path: Path, doc: dict, index: int, glb_chunk: bytes) -> bytes:
@@ -104,34 +102,10 @@ def _buffer(path: Path, doc: dict, index: int, glb_chunk: bytes) -> bytes:
 
 
 def _quat_matrix(q: np.ndarray) -> np.ndarray:
-    """(..., 4) unit quaternions (x, y, z, w) -> (..., 3, 3) rotation matrices."""
-    q = q / np.maximum(np.linalg.norm(q, axis=-1, keepdims=True), 1e-300)
-    x, y, z, w = np.moveaxis(q, -1, 0)
-    return np.stack(
-        [
-            np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)], -1),
-            np.stack([2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)], -1),
-            np.stack([2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)], -1),
-        ],
-        -2,
-    )
+    """(T, 4) quaternions (x, y, z, w; normalised here) -> (T, 3, 3) rotation matrices."""
+    from scipy.spatial.transform import Rotation
 
-
-def _slerp(q0: np.ndarray, q1: np.ndarray, u: np.ndarray) -> np.ndarray:
-    """Shortest-arc spherical interpolation of (T, 4) quaternions by (T,) fractions."""
-    q0 = q0 / np.linalg.norm(q0, axis=-1, keepdims=True)
-    q1 = q1 / np.linalg.norm(q1, axis=-1, keepdims=True)
-    dot = np.sum(q0 * q1, axis=-1)
-    q1 = np.where(dot[:, None] < 0, -q1, q1)
-    dot = np.abs(dot)
-    theta = np.arccos(np.clip(dot, -1.0, 1.0))
-    sin = np.sin(theta)
-    near = sin < 1e-8  # (nearly) equal keys: linear blend
-    safe = np.where(near, 1.0, sin)
-    a = np.where(near, 1 - u, np.sin((1 - u) * theta) / safe)
-    b = np.where(near, u, np.sin(u * theta) / safe)
-    q = a[:, None] * q0 + b[:, None] * q1
-    return q / np.linalg.norm(q, axis=-1, keepdims=True)
+    return Rotation.from_quat(q).as_matrix()
 
 
 @dataclass
@@ -167,8 +141,10 @@ class _Channel:
             if self.path == "rotation":
                 out /= np.linalg.norm(out, axis=-1, keepdims=True)
             return out
-        if self.path == "rotation":
-            return _slerp(points[k], points[k + 1], u)
+        if self.path == "rotation":  # shortest-arc slerp between the keys
+            from scipy.spatial.transform import Rotation, Slerp
+
+            return Slerp(keys, Rotation.from_quat(points))(tc).as_quat()
         return points[k] + u[:, None] * (points[k + 1] - points[k])
 
 
@@ -264,9 +240,8 @@ class GltfScene:
     def read(cls, path: str | Path) -> GltfScene:
         """Read a .glb or .gltf file (its buffers too)."""
         p = Path(path)
-        doc, first = read_gltf_document(p)
-        glb_chunk = first if p.suffix.lower() == ".glb" else b""
-        buffers = [first] + [_buffer(p, doc, k, glb_chunk) for k in range(1, len(doc.get("buffers") or []))]
+        doc, chunk = _read_container(p)
+        buffers = [_buffer(p, doc, k, chunk) for k in range(len(doc.get("buffers") or []))]
         try:
             return cls(doc, buffers, name=str(p))
         except (KeyError, IndexError, TypeError) as exc:
@@ -350,7 +325,7 @@ class GltfScene:
         uvs = self._accessor(attrs["TEXCOORD_0"]).astype(np.float64) if "TEXCOORD_0" in attrs else None
         return _Primitive(pos, faces, targets, joints, weights, uvs)
 
-    def body_vertices(self, mesh: str | None = None) -> tuple[np.ndarray, np.ndarray]:
+    def mesh_part(self, mesh: str | None = None) -> tuple[np.ndarray, np.ndarray]:
         """(indices of its vertices in the scene's arrays, its own faces) of the first instance of the mesh named
         ``mesh`` (a mesh's or its node's name); None: the mesh named ``Body`` if there is one, else every mesh."""
         if mesh is None and not any("Body" in (i.name, self.nodes[i.node].get("name")) for i in self.instances):
@@ -360,6 +335,10 @@ class GltfScene:
         if inst is None:
             names = sorted({i.name for i in self.instances})
             raise GltfError(f"{self.name}: no mesh {name!r}; it has {', '.join(map(repr, names))}")
+        return self.instance_part(inst)
+
+    def instance_part(self, inst: GltfInstance) -> tuple[np.ndarray, np.ndarray]:
+        """(indices of an instance's vertices in the scene's arrays, its own faces)."""
         own = np.all((self.faces >= inst.start) & (self.faces < inst.stop), axis=1)
         return np.arange(inst.start, inst.stop), self.faces[own] - inst.start
 
@@ -489,9 +468,8 @@ class GltfScene:
             raise GltfError(
                 f"{self.name}: a vertex names joint slot {int(prim.joints.max())} of skin {skin}'s {len(joints)}"
             )
-        mats = (np.stack([world[j] for j in joints], axis=1) @ ibm)[..., :3, :]  # (T, J, 3, 4)
-        out = np.empty(p.shape)
-        for k in range(len(p)):  # one frame at a time: (V, K, 3, 4) fits in memory where (T, V, K, 3, 4) may not
-            blend = np.einsum("vk,vkij->vij", prim.weights, mats[k][prim.joints])  # (V, 3, 4)
-            out[k] = np.einsum("vij,vj->vi", blend[..., :3], p[k]) + blend[..., 3]
-        return out
+        from garsim.geometry.skinning import apply_transforms, blended_transforms, dense_weights
+
+        mats = np.stack([world[j] for j in joints], axis=1) @ ibm  # (T, J, 4, 4)
+        dense = dense_weights(prim.joints, prim.weights, len(joints))
+        return np.stack([apply_transforms(p[k], blended_transforms(dense, mats[k])) for k in range(len(p))])

@@ -662,7 +662,7 @@ def _load(path: str | os.PathLike, y_up: bool, attributes: bool) -> tuple[np.nda
     if attributes and ext == ".obj":
         attrs = _read_obj_attributes(data, p, f)
     elif attributes and ext in USD_EXTENSIONS:
-        attrs = usd_attrs.check(len(f), str(p)) if usd_attrs.uvs is not None else attrs
+        attrs = usd_attrs.check(len(f), str(p))
     elif attributes and ext in (".glb", ".gltf"):
         attrs = _gltf_uvs(scene.uvs, f)
     elif attributes and ext != ".stl":
@@ -699,7 +699,7 @@ def _gltf_part(path: str | os.PathLike, mesh: str | None) -> tuple[Path, GltfSce
         raise MeshError(f"{p}: a mesh is picked, or an animation read, from a .glb or .gltf here (USD: usd_stage)")
     scene = _gltf_scene(p)
     try:
-        return (p, scene, *scene.body_vertices(mesh))
+        return (p, scene, *scene.mesh_part(mesh))
     except ValueError as exc:
         raise MeshError(_first_line(exc)) from None
 
