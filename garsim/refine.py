@@ -41,14 +41,16 @@ moves its vertex in full, one that has just become violated counts as little as 
 Lipschitz in the state, where a count of the active constraints, even one ramped in over 1 % of the limit, multiplied
 the sensitivity of a torn neighbour's correction by ~20) and accelerated by the Chebyshev semi-iterative method (Wang
 2015, "A Chebyshev semi-iterative approach for accelerating projective and position-based dynamics"; the momentum fades
-out near a contact). Contacts are linearised as half-spaces (closest point c, outward unit normal n: n.(x - c) >=
-margin) from exact closest-point queries, refreshed after every ``iterations`` sweeps (a round) for the vertices that
-moved near the surface; rounds repeat until nothing is violated, at most ``MAX_ROUNDS`` (a fixed budget: a prediction
-tangled with the body is improved, not solved); a final exact contact projection guarantees the margin (contact wins
-over stretch where they conflict), except past the simulator's rejection bound: a last clamp shortens the edges still
-over ``TORN_STRETCH`` x their rest length to it (Jacobi passes, by as much as they need), so no edge with a free end
-that can be shortened leaves over that bound, even where that leaves a vertex nearer than the margin or inside (an edge
-that no move can shorten, at a free vertex between pins pulled apart, stays as it is).
+out near a contact). Contacts are linearised as half-spaces (the first-order model of the signed distance s at the
+query point p, with a normal n that turns continuously across the body's facets: n.(x - p) + s >= margin; see
+``CONTACT_BLEND``) from exact distance queries, refreshed after every ``iterations`` sweeps (a round) for the
+vertices that moved near the surface; rounds repeat until nothing is violated, at most ``MAX_ROUNDS`` (a fixed budget:
+a prediction tangled with the body is improved, not solved); a final contact projection along the contact normals,
+re-queried up to four times, brings every vertex to the margin (contact wins over stretch where they conflict),
+except past the simulator's rejection bound: a last clamp shortens the edges still over ``TORN_STRETCH`` x their rest
+length to it (Jacobi passes, by as much as they need), so no edge with a free end that can be shortened leaves over
+that bound, even where that leaves a vertex nearer than the margin or inside (an edge that no move can shorten, at a
+free vertex between pins pulled apart, stays as it is).
 
 Continuity: no step is taken or skipped on a threshold of the state except at a fixed point (the rounds end early only
 when nothing is violated, where more sweeps would not move anything), and every weight starts from 0 (the fallback's
@@ -61,11 +63,12 @@ fell from 293 to 6.7 mm on 60 of our own templates in the pose sampler's wide ra
 external set (``docs/studies/refine_continuity.md``). Averaging the corrections by their lengths instead of by a count
 then brought the median scene's largest change from 0.09 to 0.02 mm on the external set and from 0.18 to 0.04 mm on
 those wide poses, and the scenes over 0.5 mm from 8 to 2 and from 20 to 8 (three noise draws each;
-``docs/studies/refine_averaging.md``), with the same or better stretch, collision and error figures. What still jumps,
-in drapes tangled with the body: a vertex inside the body whose closest surface point changes sides, where two parts
-nearly meet (crotch, armpit) or across a ridge of the faceted body (its contact normal turns by the ridge's angle), and
-the Chebyshev step's gain, which carries such a jump over the sweeps (the external set's trousers with a leg through
-them: 2.5 mm at most).
+``docs/studies/refine_averaging.md``), with the same or better stretch, collision and error figures. Contact normals
+averaged over the nearby facets (``CONTACT_BLEND``) instead of the closest feature's, which turned by a ridge's angle
+under any small move of a vertex inside the body, then brought those wide poses' scenes over 0.5 mm from 8 to 4 and
+their median from 0.036 to 0.026 mm (``docs/studies/refine_contact_normal.md``). What still jumps, in drapes tangled
+with the body: a vertex whose nearest surface changes sides where two body parts nearly meet (crotch, armpit), and the
+Chebyshev step's gain, which carries such a jump over the sweeps.
 
 Closest point on the obstacle (``garsim.geometry.inside.Obstacle``, the one exact query garsim has): a
 warp BVH over the obstacle's triangles (float32) finds each point's
@@ -186,6 +189,12 @@ accelerated ..."""
 CLAMP_RHO = 0.99
 """... by the Chebyshev step with this spectral radius estimate (8x fewer passes than plain Jacobi on that strip; the
 least-excess iterate is kept, so an oscillation costs passes, not the result)."""
+CONTACT_BLEND = 0.001
+"""m: a contact half-space's normal averages those of the body's faces within this of the nearest one's distance
+where they agree (``garsim.geometry.inside`` ``contact_plane``), so that it turns with the vertex instead of jumping
+where the vertex crosses the bisector of two faces (inside a convex ridge of the faceted body: the external set's
+trousers with a leg through them moved 2.5 mm under 1e-6 m of input noise, a vertex 4 mm inside a thigh turning its
+normal by 20 degrees)."""
 _STRETCH_TOL = 1e-3  # relative: an edge within limit * (1 + this) counts as satisfied
 _DIST_TOL = 1e-6  # m
 _DEVICE = "cpu"
@@ -201,6 +210,7 @@ def _kernels() -> SimpleNamespace:
     f64 = wp.float64
     surface_query = surface_funcs()  # the shared exact query (garsim.geometry.inside)
     signed_closest, Surface = surface_query.signed_closest, surface_query.Surface
+    contact_plane = surface_query.contact_plane
 
     @wp.func
     def ramp(t: wp.float64) -> wp.float64:
@@ -245,6 +255,8 @@ def _kernels() -> SimpleNamespace:
             if first != 1:
                 radius = wp.abs(dq[i]) + moved
             ok, s, cp, n = signed_closest(surface, x[i], radius)
+            if s < band:  # a half-space (active, the fallback's side test, the final projection): continuous
+                cp, n = contact_plane(surface, x[i], s, n, f64(CONTACT_BLEND))
             xq[i] = x[i]
             dq[i] = s
             cq[i] = cp
@@ -315,6 +327,8 @@ def _kernels() -> SimpleNamespace:
                 p = (f64(1.0) - t) * x[i] + t * x[j]
                 radius = wp.max(-bound, keep)  # nothing within it: the sample is farther out than keep
                 ok, s, cp, n = signed_closest(surface, p, radius)
+                if ok == 1 and (s < keep or s < depth[e]):
+                    cp, n = contact_plane(surface, p, s, n, f64(CONTACT_BLEND))
                 if ok == 1 and s < depth[e]:
                     depth[e] = s
                     deep_normal[e] = n
@@ -1148,7 +1162,7 @@ def refine(
         if blended is not None:
             x0 = blended
     _rounds(state, iterations, x0, smoothing_weight(fab, state.con.mean_edge))
-    # final exact contact projection (contact wins over stretch), re-checked where the body is concave, then the
+    # final contact projection (contact wins over stretch), re-checked with exact distances, then the
     # clamp of edges still torn past the simulator's bound (stretch wins there)
     for _ in range(4):
         if not state.project_contacts():

@@ -8,6 +8,7 @@ import time
 
 import numpy as np
 import pytest
+import trimesh
 
 from garsim.geometry.inside import InsideTester, collision_fraction, inside_mask
 from garsim.geometry.mesh import vertex_normals
@@ -130,3 +131,57 @@ def test_warp_starts_quietly():
     assert run.stdout == ""
     if not _cuda_driver_present():
         assert run.stderr == ""
+
+
+def test_contact_plane_turns_continuously_across_a_ridge():
+    """Inside a convex ridge (a prism whose two roof faces meet at 160 degrees), the closest face changes at the
+    bisector plane and its normal jumps by the ridge's 20 degrees under a 2e-6 m move; the contact half-space's
+    normal (``blend``) does not: on the bisector it is the mean of the two roof normals, 1 mm beyond the reach of the
+    second face it is the face's own, and its point is always p - s * normal (the first-order model of the signed
+    distance at p)."""
+    from garsim.geometry.inside import obstacle
+
+    half = np.radians(10.0)  # each roof face is tilted 10 degrees off horizontal
+    w, h, length = 0.1, 0.1 * np.tan(half), 0.4
+    v = np.array([[x, y, z] for y in (-length / 2, length / 2) for x, z in ((-w, 0.0), (w, 0.0), (0.0, h))])
+    prism = trimesh.convex.convex_hull(v)  # 8 triangles, outward
+    v, f = np.asarray(prism.vertices), np.asarray(prism.faces)
+    obs = obstacle(v, f)
+    depth = 0.004
+    p = np.array([[-1e-6, 0.0, h - depth], [1e-6, 0.0, h - depth], [0.0, 0.0, h - depth]])
+    sd, _, exact, _ = obs.query(p)
+    roof = np.array([[-np.sin(half), 0.0, np.cos(half)], [np.sin(half), 0.0, np.cos(half)]])
+    assert (sd < 0).all()
+    np.testing.assert_allclose(exact[:2], roof, atol=1e-9)  # the closest face's normal jumps by 20 degrees
+    sd_b, point, normal, _ = obs.query(p, blend=0.001)
+    np.testing.assert_array_equal(sd_b, sd)  # the distance stays exact
+    assert np.abs(normal[0] - normal[1]).max() < 1e-3
+    np.testing.assert_allclose(normal[2], [0.0, 0.0, 1.0], atol=1e-9)
+    np.testing.assert_allclose(point, p - sd[:, None] * normal, atol=1e-12)
+    # far enough from the bisector that the other roof face is more than 1 mm farther: the exact half-space
+    x = 0.01
+    q = np.array([[x, 0.0, h - x * np.tan(half) - depth]])
+    sd_q, close_q, exact_q, _ = obs.query(q)
+    _, point_q, normal_q, _ = obs.query(q, blend=0.001)
+    np.testing.assert_allclose(normal_q, exact_q, atol=1e-12)
+    np.testing.assert_allclose(point_q, close_q, atol=1e-12)
+
+
+def test_contact_plane_keeps_the_nearest_side_of_a_gap():
+    """Between two boxes 4 mm apart (a gap between body parts, their faces opposite), a point 1.9 mm from the lower
+    box and 2.1 mm from the upper one has both in reach: their normals cancel, so the contact normal is the nearest
+    side's own, not an average along the gap."""
+    from garsim.geometry.inside import obstacle
+
+    low = trimesh.creation.box(extents=[0.2, 0.2, 0.1])
+    low.apply_translation([0.0, 0.0, -0.05])  # top face at z = 0
+    high = trimesh.creation.box(extents=[0.2, 0.2, 0.1])
+    high.apply_translation([0.0, 0.0, 0.054])  # bottom face at z = 0.004
+    both = trimesh.util.concatenate([low, high])
+    obs = obstacle(np.asarray(both.vertices), np.asarray(both.faces))
+    p = np.array([[0.01, 0.02, 0.0019], [0.01, 0.02, 0.0021]])
+    sd, close, exact, _ = obs.query(p)
+    _, point, normal, _ = obs.query(p, blend=0.001)
+    np.testing.assert_allclose(sd, [0.0019, 0.0019], atol=1e-12)
+    np.testing.assert_allclose(normal, [[0.0, 0.0, 1.0], [0.0, 0.0, -1.0]], atol=1e-12)
+    np.testing.assert_allclose(point, close, atol=1e-12)

@@ -36,6 +36,9 @@ _DEVICE = "cpu"
 UNBOUNDED = 1.0e6
 """m: the search radius of a query that must find the closest point wherever it is."""
 _SLACK = 1e-5  # m: added to every float32 search radius, far above its rounding (~1e-6 at 10 m from the origin)
+_AGREE_FULL = float(np.cos(np.radians(25.0)))  # contact_plane: nearby face normals this much alike (two faces up to
+_AGREE_NONE = float(np.cos(np.radians(45.0)))  # 50 degrees apart) are averaged, from 90 degrees apart on ignored
+_AGREE_SPAN = _AGREE_FULL - _AGREE_NONE
 _TESTERS = ContentCache(4)  # per body mesh: the one-shot functions' InsideTester (never handed out)
 
 
@@ -279,11 +282,54 @@ def surface_funcs() -> SimpleNamespace:
             n = sign * diff / dist
         return 1, sign * dist, cp, n
 
+    @wp.func
+    def contact_plane(surface: Surface, p: wp.vec3d, s: wp.float64, n: wp.vec3d, blend: wp.float64):
+        """(point, outward unit normal) of a contact half-space at p that turns continuously with p across the
+        ridges of a faceted surface, where the closest feature's own normal ``n`` jumps as p crosses the bisector of
+        two faces (inside a convex ridge, outside a concave one: by the ridge's angle under an arbitrarily small
+        move) or turns by the wedge's angle within |s| of an edge outside a convex ridge (``s``: p's signed
+        distance). The faces g within |s| + ``blend`` of p average their unit normals, weighted by smoothstep((|s| +
+        blend - |p - c_g|) / ``blend``) (c_g: g's closest point to p); the normal is that average where they agree
+        (their mean's length, cos(angle / 2) for two faces, at least ``_AGREE_FULL``) and ``n`` where they do not
+        (at most ``_AGREE_NONE``: the two sides of a gap between body parts or of a thin part, where the nearest
+        surface changes sides and the normal jumps, as the distance's gradient does), normalised from a smoothstep
+        mix in between. The point is p - s * normal: the half-space is the first-order model of the signed distance
+        at p (exactly ``s`` there)."""
+        reach = wp.abs(s) + blend
+        r32 = wp.float32(reach) + wp.float32(_SLACK)
+        p32 = wp.vec3(p)
+        query = wp.mesh_query_aabb(surface.mesh, p32 - wp.vec3(r32, r32, r32), p32 + wp.vec3(r32, r32, r32))
+        verts = surface.verts
+        faces = surface.faces
+        wsum = f64(0.0)
+        nsum = wp.vec3d()
+        g = int(0)  # noqa: UP018 (warp: a dynamic loop variable the query writes, not a constant)
+        while wp.mesh_query_aabb_next(query, g):
+            a = verts[faces[g, 0]]
+            b = verts[faces[g, 1]]
+            c = verts[faces[g, 2]]
+            vw = closest_on_triangle(p, a, b, c)
+            u = wp.clamp((reach - wp.length(p - (a + vw[0] * (b - a) + vw[1] * (c - a)))) / blend, f64(0.0), f64(1.0))
+            w = u * u * (f64(3.0) - f64(2.0) * u)
+            wsum = wsum + w
+            nsum = nsum + w * face_normal(verts, faces, g)
+        m = n
+        if wsum > f64(0.0):
+            agree = wp.length(nsum) / wsum
+            k = wp.clamp((agree - f64(_AGREE_NONE)) / f64(_AGREE_SPAN), f64(0.0), f64(1.0))
+            k = k * k * (f64(3.0) - f64(2.0) * k)
+            if k > f64(0.0):
+                mix = k * nsum / wp.length(nsum) + (f64(1.0) - k) * n
+                if wp.length(mix) > f64(1e-9):
+                    m = wp.normalize(mix)
+        return p - s * m, m
+
     @wp.kernel(enable_backward=False, module="unique")
     def query_points(
         surface: Surface,
         p: wp.array(dtype=wp.vec3d),
         radius: wp.float64,
+        blend: wp.float64,
         found: wp.array(dtype=wp.int32),
         sd: wp.array(dtype=wp.float64),
         close: wp.array(dtype=wp.vec3d),
@@ -291,6 +337,8 @@ def surface_funcs() -> SimpleNamespace:
     ):
         t = wp.tid()
         ok, sd_t, cp, n = signed_closest(surface, p[t], radius)
+        if ok == 1 and blend > f64(0.0):
+            cp, n = contact_plane(surface, p[t], sd_t, n, blend)
         found[t] = ok
         sd[t] = sd_t
         close[t] = cp
@@ -302,6 +350,7 @@ def surface_funcs() -> SimpleNamespace:
         face_normal=face_normal,
         feature_normal=feature_normal,
         signed_closest=signed_closest,
+        contact_plane=contact_plane,
         query_points=query_points,
     )
 
@@ -370,10 +419,12 @@ class Obstacle:
         return self
 
     def query(
-        self, points: np.ndarray, radius: float = UNBOUNDED
+        self, points: np.ndarray, radius: float = UNBOUNDED, blend: float = 0.0
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """Signed distance (negative inside), closest point, outward unit normal and ``found`` of each point:
-        exact where the surface is within ``radius`` (``found``), else distance ``radius``, zero vectors."""
+        exact where the surface is within ``radius`` (``found``), else distance ``radius``, zero vectors.
+        ``blend`` > 0 (m): the point and normal are instead those of the continuous contact half-space
+        (``contact_plane``) that garsim.refine uses with ``CONTACT_BLEND``."""
         wp = quiet_warp()
         p = np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 3)
         m = len(p)
@@ -383,7 +434,7 @@ class Obstacle:
             wp.launch(
                 surface_funcs().query_points,
                 dim=m,
-                inputs=[self.surface, _wp(p, wp.vec3d), float(radius)],
+                inputs=[self.surface, _wp(p, wp.vec3d), float(radius), float(blend)],
                 outputs=[_wp(found, wp.int32), _wp(sd, wp.float64), _wp(close, wp.vec3d), _wp(normal, wp.vec3d)],
                 device=_DEVICE,
             )
