@@ -6,7 +6,8 @@ gets wrong and a viewer notices, and leaves everything else exactly where the ne
 (a) stretch: every edge longer than ``max_stretch`` x its rest length (from ``template``) is shortened
     to that limit; compression is left alone (cloth buckles);
 (b) contact: every vertex closer than ``margin`` to the obstacle surface, or inside it, goes to
-    ``margin`` outside along the outward direction from its closest point on the obstacle's triangles;
+    ``margin`` outside along its contact normal (the outward direction from its closest point on the obstacle's
+    triangles, averaged over the facets nearby: ``CONTACT_BLEND``);
 (c) edges through the obstacle: an edge that meets the surface (an end inside, or the segment between
     two outside ends crossing it, as a limb cutting the cloth) gets its seven samples (t = 1/8 .. 7/8)
     near the surface pushed to ``SAMPLE_CLEARANCE`` x ``margin`` outside, until no edge meets it. An
@@ -19,7 +20,7 @@ gets wrong and a viewer notices, and leaves everything else exactly where the ne
     inside the obstacle, itself or on an edge through it (an edge's depth is that of its deepest sample: a limb
     through the cloth between two shallow vertices), with a weight that rises smoothly with the depth (0 at
     ``FALLBACK_DEPTH``, 1 at ``FALLBACK_DEPTH`` + ``FALLBACK_RAMP``) times a side factor, 1 where the fallback lies
-    behind the push-out along the closest point's outward normal and 0 where it does not (``FALLBACK_SIDE``: there
+    behind the push-out along the contact normal and 0 where it does not (``FALLBACK_SIDE``: there
     the push-out already goes the fallback's way); or on a torn edge (over ``FALLBACK_STRETCH`` x its rest length,
     weight 1 at ``FALLBACK_STRETCH`` + ``FALLBACK_STRETCH_RAMP``, as far as the fallback's own edge is less torn);
     the weight is spread over a
@@ -46,11 +47,12 @@ query point p, with a normal n that turns continuously across the body's facets:
 ``CONTACT_BLEND``) from exact distance queries, refreshed after every ``iterations`` sweeps (a round) for the
 vertices that moved near the surface; rounds repeat until nothing is violated, at most ``MAX_ROUNDS`` (a fixed budget:
 a prediction tangled with the body is improved, not solved); a final contact projection along the contact normals,
-re-queried up to four times, brings every vertex to the margin (contact wins over stretch where they conflict),
-except past the simulator's rejection bound: a last clamp shortens the edges still over ``TORN_STRETCH`` x their rest
-length to it (Jacobi passes, by as much as they need), so no edge with a free end that can be shortened leaves over
-that bound, even where that leaves a vertex nearer than the margin or inside (an edge that no move can shorten, at a
-free vertex between pins pulled apart, stays as it is).
+re-queried up to four times, brings every vertex to the margin (to a few micrometres where a deep vertex's contact
+normal is not quite the distance's gradient; contact wins over stretch where they conflict), except past the
+simulator's rejection bound: a last clamp shortens the edges still over ``TORN_STRETCH`` x their rest length to it
+(Jacobi passes, by as much as they need), so no edge with a free end that can be shortened leaves over that bound, even
+where that leaves a vertex nearer than the margin or inside (an edge that no move can shorten, at a free vertex between
+pins pulled apart, stays as it is).
 
 Continuity: no step is taken or skipped on a threshold of the state except at a fixed point (the rounds end early only
 when nothing is violated, where more sweeps would not move anything), and every weight starts from 0 (the fallback's
@@ -93,17 +95,16 @@ queries (:class:`RefineMemo`): the 1-Lipschitz bound then holds from the first c
 vertices that may be within ``margin`` + ``BAND`` are queried (the query of every vertex without a radius is
 the costliest step of a call), with the result of a call without the memo.
 
-Limits: the obstacle should be closed and outward-oriented for the sign to be right (zero-area
-triangles are skipped by the search); where it intersects itself (a posed body's armpits or thighs) the
-nearest surface can be that of the other part. Stretch and contact can conflict (a pinned vertex inside
+Limits: the obstacle should be closed and outward-oriented for the sign to be right (zero-area triangles are skipped by
+the closest-point search and add no normal to a contact's average); where it intersects itself (a posed body's armpits
+or thighs) the nearest surface can be that of the other part. Stretch and contact can conflict (a pinned vertex inside
 the body, a garment too small for the body, cloth tangled with a limb): contact wins up to ``TORN_STRETCH``, stretch
-beyond it (a test maxi skirt with a knee raised into it, where the prediction was torn 6.7x and the prior 8x, left
-1.7x edges against the knee; the clamp brings them to 1.5x and leaves 0.4% of its vertices inside). Pinned vertices
-that the prior stretched apart (a long-sleeve's neckline) leave the edges between them and their neighbours over the
-limit whatever the sweeps do: such a garment always runs ``MAX_ROUNDS`` rounds. A prediction torn far past the limit
-(a leg through trousers) is left to the final clamp after the ordinary rounds, and edges still through the body after
-them stay through (see Continuity).
-"""
+beyond it (a test maxi skirt with a knee raised into it, where the prediction was torn 6.7x and the prior 8x, left 1.7x
+edges against the knee; the clamp brings them to 1.5x and leaves 0.4% of its vertices inside). Pinned vertices that the
+prior stretched apart (a long-sleeve's neckline) leave the edges between them and their neighbours over the limit
+whatever the sweeps do: such a garment always runs ``MAX_ROUNDS`` rounds. A prediction torn far past the limit (a leg
+through trousers) is left to the final clamp after the ordinary rounds, and edges still through the body after them stay
+through (see Continuity)."""
 
 # No ``from __future__ import annotations`` here: warp reads the kernels' annotations, and a string annotation
 # cannot name the local warp struct (Surface) that they take.
@@ -157,7 +158,7 @@ fallback's own edge is shorter: scaled by the same smoothstep of the two length 
 fallback is torn as much, as the skinning prior is between a skirt's legs)."""
 FALLBACK_SIDE = 0.5
 """A deep vertex, or the deepest sample of an edge through the obstacle, seeds the fallback only where the fallback
-lies behind its push-out: with c the cosine between its closest point's outward normal and the way to the fallback,
+lies behind its push-out: with c the cosine between its contact normal and the way to the fallback,
 the seed is scaled by smoothstep(-c / this), 0 from c = 0 on (the push-out already takes it the fallback's way, and
 handing the patch to the skinning prior there only adds the prior's error), 1 from c = -this (pushed out to its own
 nearest surface it would wrap the limb's far side). On 260 training samples of v4 the blend without this test and
@@ -235,10 +236,11 @@ def _kernels() -> SimpleNamespace:
         fresh: wp.array(dtype=wp.int32),
     ):
         """Each vertex's signed distance ``d`` (exact, or a lower bound >= ``band``) and whether it has a
-        contact half-space (``active``: exact, mobile, within ``band``); (xq, dq) is its last exact query (cq, nq
-        too where it was within ``band``). ``first``: 0, query the vertices that moved and may be within ``band``;
-        1, query every vertex without a radius; 2 (a warm start: (xq, dq) from an earlier call on the same obstacle
-        pose), query every vertex that may be within ``band``; with ``first`` != 0 every edge is tested again."""
+        contact half-space (``active``: exact, mobile, within ``band``); (xq, dq) is its last exact query, (cq, nq)
+        its contact half-space's point and normal there where it was within ``band``. ``first``: 0, query the
+        vertices that moved and may be within ``band``; 1, query every vertex without a radius; 2 (a warm start:
+        (xq, dq) from an earlier call on the same obstacle pose), query every vertex that may be within ``band``;
+        with ``first`` != 0 every edge is tested again."""
         i = wp.tid()
         fresh[i] = 0
         if first != 0 or wp.length(x[i] - xs[i]) > f64(0.0):  # moved since the last edge tests (sample_state)
@@ -533,7 +535,7 @@ def _kernels() -> SimpleNamespace:
         border: wp.float64,
     ):
         """(e), one thread: the fallback weight ``w`` of :func:`fallback_weight` from the seeds of
-        :func:`fallback_seed` (a deep vertex with its closest point's normal ``normal_q``; an edge through the
+        :func:`fallback_seed` (a deep vertex with its contact normal ``normal_q``; an edge through the
         obstacle, counted from ``FALLBACK_DEPTH``, at its deepest sample), then x += w * mobile * (prior - x);
         out[1] = 1 if a vertex moved."""
         n = x.shape[0]

@@ -185,3 +185,13 @@ def test_contact_plane_keeps_the_nearest_side_of_a_gap():
     np.testing.assert_allclose(sd, [0.0019, 0.0019], atol=1e-12)
     np.testing.assert_allclose(normal, [[0.0, 0.0, 1.0], [0.0, 0.0, -1.0]], atol=1e-12)
     np.testing.assert_allclose(point, close, atol=1e-12)
+    # the far side finely tessellated (a fan of 48 triangles facing down over p), the near side two triangles: the
+    # far side's many normals outweigh the near side's in the mean, which must not turn the normal into the near side
+    ring = np.linspace(0.0, 2.0 * np.pi, 48, endpoint=False)
+    fan_v = np.vstack(
+        [[0.01, 0.02, 0.004], np.c_[0.01 + 0.01 * np.cos(ring), 0.02 + 0.01 * np.sin(ring), np.full(48, 0.004)]]
+    )
+    fan_f = np.array([[0, 1 + (k + 1) % 48, 1 + k] for k in range(48)]) + len(low.vertices)
+    obs = obstacle(np.vstack([low.vertices, fan_v]), np.vstack([low.faces, fan_f]))
+    _, _, normal, _ = obs.query(p[:1], blend=0.001)
+    np.testing.assert_allclose(normal, [[0.0, 0.0, 1.0]], atol=1e-12)

@@ -289,12 +289,14 @@ def surface_funcs() -> SimpleNamespace:
         two faces (inside a convex ridge, outside a concave one: by the ridge's angle under an arbitrarily small
         move) or turns by the wedge's angle within |s| of an edge outside a convex ridge (``s``: p's signed
         distance). The faces g within |s| + ``blend`` of p average their unit normals, weighted by smoothstep((|s| +
-        blend - |p - c_g|) / ``blend``) (c_g: g's closest point to p); the normal is that average where they agree
-        (their mean's length, cos(angle / 2) for two faces, at least ``_AGREE_FULL``) and ``n`` where they do not
-        (at most ``_AGREE_NONE``: the two sides of a gap between body parts or of a thin part, where the nearest
-        surface changes sides and the normal jumps, as the distance's gradient does), normalised from a smoothstep
-        mix in between. The point is p - s * normal: the half-space is the first-order model of the signed distance
-        at p (exactly ``s`` there)."""
+        blend - |p - c_g|) / ``blend``) (c_g: g's closest point to p); the normal is that average where the faces
+        agree and it agrees with ``n`` (the mean's length, and its cosine with ``n``, each cos(angle / 2) for two
+        equally weighted faces of a ridge, both at least ``_AGREE_FULL``: ridges up to 50 degrees), ``n`` where either
+        is at most ``_AGREE_NONE`` (the two sides of a gap between body parts or of a thin part, where the nearest
+        surface changes sides and the normal jumps, as the distance's gradient does; many small faces on the far
+        side would otherwise outweigh the near side's few), normalised from a smoothstep mix in between. The point
+        is p - s * normal: the half-space is the first-order model of the signed distance at p (exactly ``s``
+        there; along a blended normal, not exactly its gradient)."""
         reach = wp.abs(s) + blend
         r32 = wp.float32(reach) + wp.float32(_SLACK)
         p32 = wp.vec3(p)
@@ -314,14 +316,16 @@ def surface_funcs() -> SimpleNamespace:
             wsum = wsum + w
             nsum = nsum + w * face_normal(verts, faces, g)
         m = n
-        if wsum > f64(0.0):
-            agree = wp.length(nsum) / wsum
-            k = wp.clamp((agree - f64(_AGREE_NONE)) / f64(_AGREE_SPAN), f64(0.0), f64(1.0))
-            k = k * k * (f64(3.0) - f64(2.0) * k)
+        length = wp.length(nsum)
+        if wsum > f64(0.0) and length > f64(0.0):
+            mean = nsum / length
+            # agreement among the faces (the mean's length) and with the nearest feature (many small faces across a
+            # gap can outweigh the near side's few: their mean then points into the near side)
+            k = wp.clamp((length / wsum - f64(_AGREE_NONE)) / f64(_AGREE_SPAN), f64(0.0), f64(1.0))
+            j = wp.clamp((wp.dot(mean, n) - f64(_AGREE_NONE)) / f64(_AGREE_SPAN), f64(0.0), f64(1.0))
+            k = k * k * (f64(3.0) - f64(2.0) * k) * j * j * (f64(3.0) - f64(2.0) * j)
             if k > f64(0.0):
-                mix = k * nsum / wp.length(nsum) + (f64(1.0) - k) * n
-                if wp.length(mix) > f64(1e-9):
-                    m = wp.normalize(mix)
+                m = wp.normalize(k * mean + (f64(1.0) - k) * n)  # the mean is within 45 degrees of n: never zero
         return p - s * m, m
 
     @wp.kernel(enable_backward=False, module="unique")
