@@ -564,9 +564,9 @@ def screenshot(
 ) -> Path:
     """Load ``url`` (a running viewer) in headless Chromium with software WebGL (SwiftShader), wait until the page
     shows ``ready_text`` (viser's panel has arrived) and ``settle`` seconds more (meshes decoded and drawn), close
-    notifications, and write a ``width`` x ``height`` PNG to ``path``. Nothing is downloaded; without a Chromium
-    (``apt-get install chromium``) this raises :class:`ViewerUnavailable`. Driven through the DevTools protocol
-    with ``websockets`` (a viser dependency)."""
+    notifications, wait until two captures a second apart agree (or ``timeout``), and write a ``width`` x ``height``
+    PNG to ``path``. Nothing is downloaded; without a Chromium (``apt-get install chromium``) this raises
+    :class:`ViewerUnavailable`. Driven through the DevTools protocol with ``websockets`` (a viser dependency)."""
     import base64
     import os
     import shutil
@@ -638,8 +638,12 @@ def screenshot(
                 ".forEach(b => b.click())"
             )
             _cdp(ws, "Runtime.evaluate", {"expression": close})
-            time.sleep(0.5)
-            data = _cdp(ws, "Page.captureScreenshot", {"format": "png"})["data"]
+            # then until two captures a second apart agree: software WebGL on busy cores can take longer than
+            # ``settle`` to decode and draw the meshes (a test's capture once showed the empty grid)
+            data, previous = None, ""
+            while data != previous and time.monotonic() < deadline:
+                time.sleep(0.5 if data is None else 1.0)
+                previous, data = data, _cdp(ws, "Page.captureScreenshot", {"format": "png"})["data"]
         return atomic_write_bytes(path, base64.b64decode(data))
     finally:
         proc.terminate()
