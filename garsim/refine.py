@@ -67,8 +67,8 @@ then brought the median scene's largest change from 0.09 to 0.02 mm on the exter
 those wide poses, and the scenes over 0.5 mm from 8 to 2 and from 20 to 8 (three noise draws each;
 ``docs/studies/refine_averaging.md``), with the same or better stretch, collision and error figures. Contact normals
 averaged over the nearby facets (``CONTACT_BLEND``) instead of the closest feature's, which turned by a ridge's angle
-under any small move of a vertex inside the body, then brought those wide poses' scenes over 0.5 mm from 8 to 4 and
-their median from 0.036 to 0.026 mm (``docs/studies/refine_contact_normal.md``). What still jumps, in drapes tangled
+under any small move of a vertex inside the body, then brought those wide poses' scenes over 0.5 mm from 8 to 6 and
+their median from 0.036 to 0.031 mm (``docs/studies/refine_contact_normal.md``). What still jumps, in drapes tangled
 with the body: a vertex whose nearest surface changes sides where two body parts nearly meet (crotch, armpit), and the
 Chebyshev step's gain, which carries such a jump over the sweeps.
 
