@@ -640,8 +640,8 @@ def screenshot(
             _cdp(ws, "Runtime.evaluate", {"expression": close})
             # then until two captures a second apart agree: software WebGL on busy cores can take longer than
             # ``settle`` to decode and draw the meshes (a test's capture once showed the empty grid)
-            data, previous = None, ""
-            while data != previous and time.monotonic() < deadline:
+            data, previous = None, None
+            while data is None or (data != previous and time.monotonic() < deadline):
                 time.sleep(0.5 if data is None else 1.0)
                 previous, data = data, _cdp(ws, "Page.captureScreenshot", {"format": "png"})["data"]
         return atomic_write_bytes(path, base64.b64decode(data))
