@@ -51,6 +51,11 @@ def test_bad_inputs(icosphere):
         InsideTester(v, f).inside(np.full((1, 3), np.nan))
     with pytest.raises(ValueError, match="outside"):
         InsideTester(v, f + len(v))
+    from garsim.geometry.inside import obstacle
+
+    for blend in (-0.001, np.nan):
+        with pytest.raises(ValueError, match="blend must be"):
+            obstacle(v, f).query(np.zeros((1, 3)), blend=blend)
 
 
 def test_collision_fraction_on_a_sphere(icosphere):

@@ -429,6 +429,8 @@ class Obstacle:
         exact where the surface is within ``radius`` (``found``), else distance ``radius``, zero vectors.
         ``blend`` > 0 (m): the point and normal are instead those of the continuous contact half-space
         (``contact_plane``) that garsim.refine uses with ``CONTACT_BLEND``."""
+        if not np.isfinite(blend) or blend < 0:
+            raise ValueError(f"blend must be a finite distance >= 0 metres (0: the exact closest point), got {blend!r}")
         wp = quiet_warp()
         p = np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 3)
         m = len(p)
