@@ -212,12 +212,7 @@ def _kernels() -> SimpleNamespace:
     surface_query = surface_funcs()  # the shared exact query (garsim.geometry.inside)
     signed_closest, Surface = surface_query.signed_closest, surface_query.Surface
     contact_plane = surface_query.contact_plane
-
-    @wp.func
-    def ramp(t: wp.float64) -> wp.float64:
-        """smoothstep: 3t^2 - 2t^3 of t clipped to [0, 1] (as garsim.geometry.proximity.smoothstep)."""
-        u = wp.clamp(t, f64(0.0), f64(1.0))
-        return u * u * (f64(3.0) - f64(2.0) * u)
+    ramp = surface_query.smoothstep
 
     @wp.kernel(enable_backward=False, module="unique")
     def vertex_state(
@@ -322,6 +317,7 @@ def _kernels() -> SimpleNamespace:
             reach = f64(0.5) * wp.max(inside, f64(0.0)) * length
         hit[e] = 1
         clearance[e] = floor * ramp(reach / f64(SAMPLE_RAMP))
+        deep_n = wp.vec3d()
         for k in range(ts.shape[0]):
             t = ts[k]
             bound = wp.max(d[i] - t * length, d[j] - (f64(1.0) - t) * length)
@@ -329,16 +325,20 @@ def _kernels() -> SimpleNamespace:
                 p = (f64(1.0) - t) * x[i] + t * x[j]
                 radius = wp.max(-bound, keep)  # nothing within it: the sample is farther out than keep
                 ok, s, cp, n = signed_closest(surface, p, radius)
-                if ok == 1 and (s < keep or s < depth[e]):
-                    cp, n = contact_plane(surface, p, s, n, f64(CONTACT_BLEND))
-                if ok == 1 and s < depth[e]:
-                    depth[e] = s
-                    deep_normal[e] = n
-                    deep_t[e] = t
                 if ok == 1 and s < keep:
+                    cp, n = contact_plane(surface, p, s, n, f64(CONTACT_BLEND))
                     close[e, k] = cp
                     normal[e, k] = n
                     listed[wp.atomic_add(count, 0, 1)] = e * ts.shape[0] + k
+                if ok == 1 and s < depth[e]:
+                    depth[e] = s
+                    deep_n = n
+                    deep_t[e] = t
+        if depth[e] < f64(UNBOUNDED):
+            if depth[e] >= keep:  # not listed: its contact normal is not computed yet
+                p = (f64(1.0) - deep_t[e]) * x[i] + deep_t[e] * x[j]
+                cp, deep_n = contact_plane(surface, p, depth[e], deep_n, f64(CONTACT_BLEND))
+            deep_normal[e] = deep_n
 
     @wp.func
     def edge_over(

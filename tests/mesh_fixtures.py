@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
+import trimesh
 
 
 def open_cylinder(
@@ -87,3 +88,13 @@ def plane_grid(half: float = 0.2, n: int = 21) -> tuple[np.ndarray, np.ndarray]:
     idx = np.arange(gx.size).reshape(n, n)
     quads = np.stack([idx[:-1, :-1], idx[1:, :-1], idx[1:, 1:], idx[:-1, 1:]], axis=-1).reshape(-1, 4)
     return v, np.concatenate([quads[:, [0, 1, 2]], quads[:, [0, 2, 3]]])
+
+
+def ridge_prism(tilt_deg: float = 10.0, half: float = 0.1, length: float = 0.4) -> tuple[np.ndarray, np.ndarray, float]:
+    """A convex prism along y whose two roof faces, each tilted ``tilt_deg`` off horizontal, meet at a ridge on x = 0
+    (180 - 2 tilt degrees between them, as between two facets of a limb) over a floor z = 0 of width 2 ``half`` ->
+    (float64 vertices, int64 outward faces, the ridge's height)."""
+    h = half * np.tan(np.radians(tilt_deg))
+    v = [[x, y, z] for y in (-length / 2, length / 2) for x, z in ((-half, 0.0), (half, 0.0), (0.0, h))]
+    prism = trimesh.convex.convex_hull(v)  # 8 triangles, outward
+    return np.asarray(prism.vertices, dtype=np.float64), np.asarray(prism.faces, dtype=np.int64), float(h)

@@ -9,6 +9,7 @@ import time
 import numpy as np
 import pytest
 import trimesh
+from mesh_fixtures import ridge_prism
 
 from garsim.geometry.inside import InsideTester, collision_fraction, inside_mask
 from garsim.geometry.mesh import vertex_normals
@@ -147,10 +148,7 @@ def test_contact_plane_turns_continuously_across_a_ridge():
     from garsim.geometry.inside import obstacle
 
     half = np.radians(10.0)  # each roof face is tilted 10 degrees off horizontal
-    w, h, length = 0.1, 0.1 * np.tan(half), 0.4
-    v = np.array([[x, y, z] for y in (-length / 2, length / 2) for x, z in ((-w, 0.0), (w, 0.0), (0.0, h))])
-    prism = trimesh.convex.convex_hull(v)  # 8 triangles, outward
-    v, f = np.asarray(prism.vertices), np.asarray(prism.faces)
+    v, f, h = ridge_prism(10.0)
     obs = obstacle(v, f)
     depth = 0.004
     p = np.array([[-1e-6, 0.0, h - depth], [1e-6, 0.0, h - depth], [0.0, 0.0, h - depth]])

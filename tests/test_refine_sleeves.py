@@ -8,7 +8,7 @@ import time
 import numpy as np
 import pytest
 import trimesh
-from mesh_fixtures import plane_grid, sleeve
+from mesh_fixtures import plane_grid, ridge_prism, sleeve
 
 from garsim.geometry.mesh import unique_edges
 from garsim.refine import RefineMemo, _constraints, _State, fallback_seed, fallback_weight, obstacle, refine
@@ -275,9 +275,7 @@ def test_cloth_sunk_into_a_ridge_of_a_faceted_body_comes_out_continuously():
     its normal they went ~2 mm apart (the external set's trousers with a leg through them moved 2.5 mm under 1e-6 m of
     input noise). Pushed out along the continuous contact normal they move continuously, and end outside."""
     half = np.radians(10.0)
-    w, h = 0.1, 0.1 * np.tan(np.radians(10.0))
-    ridge = trimesh.convex.convex_hull([[x, y, z] for y in (-0.2, 0.2) for x, z in ((-w, 0.0), (w, 0.0), (0.0, h))])
-    bv, bf = np.asarray(ridge.vertices), np.asarray(ridge.faces, dtype=np.int64)
+    bv, bf, h = ridge_prism(10.0)
     v, f = plane_grid(0.03, 7)  # a column of vertices on x = 0, the bisector
     v[:, 2] = h - np.abs(v[:, 0]) * np.tan(half) - 0.004
     assert _signed(v, bv, bf).max() < 0

@@ -188,6 +188,12 @@ def surface_funcs() -> SimpleNamespace:
         vf_face: wp.array(dtype=wp.int32)
 
     @wp.func
+    def smoothstep(t: wp.float64) -> wp.float64:
+        """3t^2 - 2t^3 of t clipped to [0, 1] (as garsim.geometry.proximity.smoothstep)."""
+        u = wp.clamp(t, f64(0.0), f64(1.0))
+        return u * u * (f64(3.0) - f64(2.0) * u)
+
+    @wp.func
     def closest_on_triangle(p: wp.vec3d, a: wp.vec3d, b: wp.vec3d, c: wp.vec3d) -> wp.vec3d:
         """(v, w, feature) of the closest point a + v (b - a) + w (c - a) (Ericson 5.1.5); feature 0 is the
         interior, 1 + k corner k, 4 + k the edge opposite corner k."""
@@ -311,8 +317,7 @@ def surface_funcs() -> SimpleNamespace:
             b = verts[faces[g, 1]]
             c = verts[faces[g, 2]]
             vw = closest_on_triangle(p, a, b, c)
-            u = wp.clamp((reach - wp.length(p - (a + vw[0] * (b - a) + vw[1] * (c - a)))) / blend, f64(0.0), f64(1.0))
-            w = u * u * (f64(3.0) - f64(2.0) * u)
+            w = smoothstep((reach - wp.length(p - (a + vw[0] * (b - a) + vw[1] * (c - a)))) / blend)
             wsum = wsum + w
             nsum = nsum + w * face_normal(verts, faces, g)
         m = n
@@ -321,9 +326,8 @@ def surface_funcs() -> SimpleNamespace:
             mean = nsum / length
             # agreement among the faces (the mean's length) and with the nearest feature (many small faces across a
             # gap can outweigh the near side's few: their mean then points into the near side)
-            k = wp.clamp((length / wsum - f64(_AGREE_NONE)) / f64(_AGREE_SPAN), f64(0.0), f64(1.0))
-            j = wp.clamp((wp.dot(mean, n) - f64(_AGREE_NONE)) / f64(_AGREE_SPAN), f64(0.0), f64(1.0))
-            k = k * k * (f64(3.0) - f64(2.0) * k) * j * j * (f64(3.0) - f64(2.0) * j)
+            k = smoothstep((length / wsum - f64(_AGREE_NONE)) / f64(_AGREE_SPAN))
+            k = k * smoothstep((wp.dot(mean, n) - f64(_AGREE_NONE)) / f64(_AGREE_SPAN))
             if k > f64(0.0):
                 m = wp.normalize(k * mean + (f64(1.0) - k) * n)  # the mean is within 45 degrees of n: never zero
         return p - s * m, m
@@ -350,6 +354,7 @@ def surface_funcs() -> SimpleNamespace:
 
     return SimpleNamespace(
         Surface=Surface,
+        smoothstep=smoothstep,
         closest_on_triangle=closest_on_triangle,
         face_normal=face_normal,
         feature_normal=feature_normal,
