@@ -27,7 +27,7 @@
 # v0.5: PROCS=1 BATCH=8 LR=5e-4 STAGE1_EPOCHS=30 STAGE2_EPOCHS=0 REMESH=2 (and PAIR=2:
 # the paired-fabric candidate of docs/studies/pair_loss.md, not shipped).
 # v0.8 was v0.7 averaged with its 6-epoch fine-tune on v5 (garsim/weights/MODEL_CARD.md).
-# The script prints the last stage's model folder; ship it with: .venv/bin/python -c "from garsim.model.garsim
+# The script prints the last stage's model folder (and writes it to $OUT/model.txt); ship it with: .venv/bin/python -c "from garsim.model.garsim
 #   import GarSimModel; GarSimModel.load('<that folder>').save('garsim/weights')"
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -76,4 +76,5 @@ if [ "$EPOCHS2" -gt 0 ]; then
     --init "$MODEL"
   MODEL="$OUT/stage2/best"
 fi
+echo "$MODEL" > "$OUT/model.txt"
 echo "$MODEL"
