@@ -48,8 +48,8 @@ data: $(STAMP)
 # 1,196 samples on the 2 cores), in resumable stages (rerun to continue); it prints the model folder to ship (stage 1,
 # then the fine-tune and the fabric stage, each averaged with its start) and writes it to $(RUN)/model.txt. One
 # remeshed variant per sample, not the rehearsals' two: on the complete folder (~3,150 samples) two would cache
-# ~37,800 graphs, ~24 GB for the two processes, more than this machine's memory; one caches ~25,200 (~19 GB), ~8
-# minutes an epoch, about 3 hours in all (docs/studies/training_cost.md):
+# ~37,800 graphs, ~24 GB for the two processes before the cache shared equal tensors; one caches ~25,200 (~14-15 GB
+# with the sharing, ~19 GB without), ~8 minutes an epoch, about 3 hours in all (docs/studies/training_cost.md):
 #   nohup make train > ~/garsim-runs/train.log 2>&1 &     then: make results RUN=~/garsim-runs/v1/stage1 MODEL=<printed>
 # The fabric stage (3 epochs of the heavy smoothed pair term and the fold term, averaged back) is in: in the session-30
 # rehearsal it took the paired groups' ordering from 0.775 to 0.892 for +0.21 mm on test (docs/studies/scratch_v5.md).

@@ -237,3 +237,39 @@ def test_the_deepsd_baseline_trains_with_the_same_loop(tmp_path):
     assert isinstance(DeePSDBaseline.load(tmp_path / "run" / "best"), DeePSDBaseline)
     with pytest.raises(ValueError, match="unknown model"):
         Trainer(small, _cfg(tmp_path / "x", model="pointnet"), tr, va)
+
+
+def test_cached_graphs_share_equal_tensors_and_equal_fresh_builds():
+    """A sample, its rest sample and its copy in another fabric have one template and canonical body: cached, their
+    graphs hold one copy of each tensor they have in common (the garment's edges, faces, encoder inputs; the edge
+    features hold the pose's edge vectors too), so the cache
+    is smaller than its graphs; each cached graph equals a fresh build, and a batch does not alias the cache."""
+    import dataclasses
+
+    from garsim.model.graph import collate
+    from garsim.train.data import rest_sample
+    from garsim.train.trainer import GraphDataset
+
+    s = make_samples(1)[0]
+    other = dataclasses.replace(s, fabric="leather")
+    samples = [s, rest_sample(s), other, make_samples(1, seed=9)[0]]
+    cached = GraphDataset(samples, SMALL)
+    fresh = GraphDataset(samples, SMALL, cache=False)
+    cached.build(range(len(samples)))
+    graphs = [cached[i] for i in range(len(samples))]
+    for i, g in enumerate(graphs):
+        ref = fresh[i]
+        assert sorted(g.keys()) == sorted(ref.keys())
+        assert all(torch.equal(g[k], ref[k]) for k in ref.keys() if torch.is_tensor(ref[k]))
+    for key in ("edge_index", "faces", "gar_rel", "body_rel", "anchor_index"):
+        assert graphs[0][key] is graphs[1][key] is graphs[2][key], key
+    for key in ("edge_index", "gar_rel", "target"):  # another garment of the same grid: shared where equal only
+        a, b = graphs[0][key], graphs[3][key]
+        assert (a is b) == (a.shape == b.shape and torch.equal(a, b)), key
+    assert graphs[0].edge_index is graphs[3].edge_index and graphs[0].gar_rel is not graphs[3].gar_rel
+    assert not torch.equal(graphs[0].target, graphs[1].target) and graphs[0].target is not graphs[1].target
+    every = sum(v.element_size() * v.numel() for g in graphs for v in g.values() if torch.is_tensor(v))
+    assert cached.cached_bytes() < 0.7 * every
+    batch = collate(graphs[:2])
+    batch.edge_attr += 1.0  # a batch is a copy: the cache is untouched
+    assert torch.equal(graphs[0].edge_attr, fresh[0].edge_attr)
