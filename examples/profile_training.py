@@ -1,5 +1,6 @@
 """What a training stage costs: graph building, seconds per epoch and peak memory per process, on a share of a
-dataset with the recipe's augmentations (remeshed variants, mirror images) and loss terms, from the shipped weights.
+dataset with the recipe's augmentations (remeshed variants, mirror images) and loss terms, from the shipped weights,
+and the cached graphs' memory (``cached_mb``; ``unshared_mb`` without the sharing of equal tensors).
 
 Run (two DDP processes on CPU, as ``examples/train_v1.sh`` trains):
     OMP_NUM_THREADS=1 .venv/bin/torchrun --nproc_per_node=2 examples/profile_training.py \\
@@ -67,6 +68,9 @@ def main() -> None:
         "peak_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss // 1024,
         "graphs_cached": len(trainer.train_set._graphs),  # the cache itself: older checkouts have no accessor
     }
+    if hasattr(trainer.train_set, "cached_bytes"):  # since 2026-12-07: the cache shares equal tensors
+        row["cached_mb"] = round(trainer.train_set.cached_bytes() / 2**20, 1)
+        row["unshared_mb"] = round(trainer.train_set.cached_bytes(shared=False) / 2**20, 1)
     rows = [row] * trainer.world
     if trainer.world > 1:
         dist.all_gather_object(rows, row)

@@ -152,10 +152,11 @@ class GraphDataset(Dataset):
         """The indices whose graphs are cached, sorted."""
         return sorted(self._graphs)
 
-    def cached_bytes(self) -> int:
-        """Bytes of the cached graphs' tensors, each shared tensor counted once."""
-        seen = {t.data_ptr(): t.element_size() * t.numel() for g in self._graphs.values() for _, t in _tensors_of(g)}
-        return sum(seen.values())
+    def cached_bytes(self, shared: bool = True) -> int:
+        """Bytes of the cached graphs' tensors, each shared tensor counted once (``shared=False``: once per graph
+        that holds it, as an unshared cache would)."""
+        sizes = [(t.data_ptr(), t.element_size() * t.numel()) for g in self._graphs.values() for _, t in _tensors_of(g)]
+        return sum(dict(sizes).values()) if shared else sum(size for _, size in sizes)
 
     def _share(self, g: GarmentGraph) -> GarmentGraph:
         """``g`` with each tensor replaced by an equal one of a graph cached before, where there is one: a sample's
