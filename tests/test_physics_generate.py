@@ -174,6 +174,31 @@ def test_a_second_run_of_the_same_shard_into_one_folder_is_refused(tmp_path, mon
     assert (tmp_path / ".generate-0-of-1.lock").read_text(encoding="utf-8") == str(os.getpid())
 
 
+_HOLDER_SCRIPT = """
+import sys, time
+from pathlib import Path
+from garsim.physics import generate as gen
+def slow(args):
+    print("running", flush=True)
+    time.sleep(60)
+gen._run_one = slow
+gen.generate(gen.GenerateConfig(out=Path(sys.argv[1]), num_train=2, num_test=0, num_ood=0, workers=1), progress=False)
+"""
+
+
+def test_a_killed_run_frees_its_folder_at_once(tmp_path, monkeypatch):
+    """SIGKILL of a run that holds the folder leaves no stale lock: the next run starts at once."""
+    proc = subprocess.Popen([sys.executable, "-c", _HOLDER_SCRIPT, str(tmp_path)], stdout=subprocess.PIPE, text=True)
+    assert proc.stdout.readline().strip() == "running"
+    cfg = GenerateConfig(out=tmp_path, num_train=2, num_test=0, num_ood=0, workers=1)
+    with pytest.raises(RuntimeError, match=f"pid {proc.pid}"):
+        gen.generate(cfg, progress=False)
+    os.kill(proc.pid, signal.SIGKILL)
+    proc.wait()
+    monkeypatch.setattr(gen, "_run_one", lambda args: {"entries": [], "rejections": []})
+    assert gen.generate(cfg, progress=False)["pending"] == 2
+
+
 def test_strap_pins_bind_the_folder_only_when_not_the_legacy_band(tmp_path, monkeypatch):
     """``strap_pins="band"`` is left out of ``settings()`` (folders made before it match); "crest" is a setting, so
     a band folder refuses a crest rerun; an unknown value is refused."""
