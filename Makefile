@@ -32,7 +32,7 @@ test-all: $(STAMP)
 # The v5 dataset (issue 8): the training folder and the test / ood folder generated side by side, one worker each;
 # when the test folder is complete, the training folder goes on with both workers (stopped and resumed: the job it
 # was simulating is redone). Each is resumable (rerun after an interruption: finished jobs are kept, a mismatched
-# setting is refused). Hours of CPU:
+# setting is refused); a run whose jobs failed transiently (exit status 3) is rerun, up to three times. Hours of CPU:
 #   nohup make data > ~/garsim-data/generate.log 2>&1 &
 DATA_ROOT ?= $(HOME)/garsim-data
 GENERATE := $(VENV)/bin/garsim data generate --seed 0 --strap-pins crest
@@ -42,7 +42,7 @@ data: $(STAMP)
 	$(GENERATE) --workers 1 $(TRAIN_FOLDER) & train=$$!; \
 	$(GENERATE) --workers 1 --out $(DATA_ROOT)/v5test --train 0 --test 260 --ood 64 || { wait $$train; exit 1; }; \
 	kill $$train 2>/dev/null; wait $$train; \
-	$(GENERATE) --workers 2 $(TRAIN_FOLDER)
+	for try in 1 2 3; do $(GENERATE) --workers 2 $(TRAIN_FOLDER) && exit 0; sleep 10; done; exit 1
 
 # The v1.0 training recipe from scratch on the v5 training folder (issue 9; docs/studies/scratch_v5.md: 48 minutes on
 # 1,196 samples on the 2 cores), in resumable stages (rerun to continue); it prints the model folder to ship (stage 1,

@@ -51,6 +51,8 @@ FABRIC_HELP = (
     "(N·m, kg/m², N/m; optionally friction, bending_damping, stretch_damping, thickness, which only the "
     "simulator of `garsim data generate` reads: the model's drape depends on bending, density and stretch)"
 )
+INCOMPLETE = 3
+"""Exit status of ``garsim data generate`` when jobs failed transiently (rerun to retry them; 2: a usage error)."""
 MOTION_FRAMES = 30
 """``garsim animate --frames``' default: the frames of a --motion."""
 FAMILY_CHOICES: tuple[str, ...] = ("skirt", "top", "tshirt", "longsleeve", "trousers", "dress")
@@ -680,6 +682,13 @@ def cmd_data_generate(args: argparse.Namespace) -> int:
     if secs:
         summary["mean_seconds_per_sequence"] = round(sum(secs) / len(secs), 2)
     print(json.dumps(summary, indent=2))
+    if summary.get("errors"):  # transient failures (a failed write, a killed worker): not rejections
+        print(
+            f"garsim data generate: {summary['errors']} jobs failed and were not recorded; rerun the same command "
+            "to retry them",
+            file=sys.stderr,
+        )
+        return INCOMPLETE
     return 0
 
 

@@ -7,7 +7,7 @@ import pytest
 import torch
 import trimesh
 
-from garsim.cli import build_parser, main
+from garsim.cli import INCOMPLETE, build_parser, main
 from garsim.data.store import DatasetStore
 
 
@@ -112,6 +112,10 @@ def test_data_generate_passes_its_settings(tmp_path, monkeypatch, capsys):
     assert (a.strap_pins, a.reuse, b.strap_pins, b.reuse) == ("band", None, "crest", Path("v4"))
     assert b.num_train == gen.GenerateConfig.num_train and a.settings() == replace(b, strap_pins="band").settings()
     assert '"seconds"' not in capsys.readouterr().out
+    # jobs that failed transiently are not recorded: the run says so and exits INCOMPLETE, for a script to rerun it
+    monkeypatch.setattr(gen, "generate", lambda cfg, progress: {"seconds": [], "errors": 2})
+    assert main(["data", "generate", "--out", out, "--quiet"]) == INCOMPLETE == 3
+    assert "2 jobs failed and were not recorded; rerun the same command" in capsys.readouterr().err
 
 
 def test_demo(tmp_path, capsys):
