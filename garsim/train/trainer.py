@@ -162,7 +162,7 @@ class GraphDataset(Dataset):
         """``g`` with each tensor replaced by an equal one of a graph cached before, where there is one: a sample's
         rest sample, its other target poses and its paired fabric copies have one template and canonical body, so
         most of their graphs' memory (encoder inputs, anchors, edges, faces) is the same (on v5 with the recipe's
-        remeshed and mirrored variants, ~40% of the cache). Cached graphs are only read (a batch is a copy)."""
+        remeshed and mirrored variants, a third of the cache). Cached graphs are only read (a batch is a copy)."""
         for key, value in _tensors_of(g):
             kept = self._tensors.setdefault(content_key(value.numpy()), value)
             if kept is not value and torch.equal(kept, value):
