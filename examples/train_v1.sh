@@ -22,6 +22,8 @@
 #   MIRROR [0]         1: every training sample also mirrored left to right in stage 1 (garsim train --mirror)
 #   FABRIC_EPOCHS [0]  epochs of the fabric stage
 #   SOUP [0]           1: average each fine-tuning stage with its start (above)
+#   INIT []            a model folder: skip stage 1 and fine-tune that model instead (e.g. garsim/weights on a
+#                      grown dataset folder)
 # v0.6 and later (garsim/weights/MODEL_CARD.md): PROCS=2 BATCH=4 LR=5e-4 STAGE1_EPOCHS=12 FINETUNE_EPOCHS=4
 # STAGE2_EPOCHS=0 REMESH=2 MIRROR=1 PAIR=1 (shipped from $OUT/finetune/best).
 # v0.5: PROCS=1 BATCH=8 LR=5e-4 STAGE1_EPOCHS=30 STAGE2_EPOCHS=0 REMESH=2 (and PAIR=2:
@@ -45,10 +47,13 @@ TRAIN=("${LAUNCH[@]}" train --data "$DATA" --batch-size "${BATCH:-4}" --quiet --
 EPOCHS1=${STAGE1_EPOCHS:-300}
 MIRROR_FLAG=()
 if [ "${MIRROR:-0}" = 1 ]; then MIRROR_FLAG=(--mirror); fi
-"${TRAIN[@]}" --out "$OUT/stage1" --resolution low --epochs "$EPOCHS1" --lr "${LR:-1e-3}" --head displacement \
-  --collision-start $((EPOCHS1 * 2 / 3)) --remesh-copies "${REMESH:-0}" \
-  "${MIRROR_FLAG[@]}"
-MODEL="$OUT/stage1/best"
+if [ -n "${INIT:-}" ]; then
+  MODEL=$INIT
+else
+  "${TRAIN[@]}" --out "$OUT/stage1" --resolution low --epochs "$EPOCHS1" --lr "${LR:-1e-3}" --head displacement \
+    --collision-start $((EPOCHS1 * 2 / 3)) --remesh-copies "${REMESH:-0}" "${MIRROR_FLAG[@]}"
+  MODEL="$OUT/stage1/best"
+fi
 finish() {  # $1: a fine-tuning stage's folder -> MODEL: its best weights, or with SOUP=1 their average with MODEL
   if [ "${SOUP:-0}" = 1 ]; then
     .venv/bin/garsim average --models "$MODEL" "$1/best" --out "$1/soup" > /dev/null
