@@ -28,7 +28,8 @@
 # STAGE2_EPOCHS=0 REMESH=2 MIRROR=1 PAIR=1 (shipped from $OUT/finetune/best).
 # v0.5: PROCS=1 BATCH=8 LR=5e-4 STAGE1_EPOCHS=30 STAGE2_EPOCHS=0 REMESH=2 (and PAIR=2:
 # the paired-fabric candidate of docs/studies/pair_loss.md, not shipped).
-# v0.8 was v0.7 averaged with its 6-epoch fine-tune on v5 (garsim/weights/MODEL_CARD.md).
+# v0.8 was v0.7 averaged with its 6-epoch fine-tune on v5; v0.9 is v0.8 fine-tuned with INIT (FINETUNE_EPOCHS=6
+# FINETUNE_LR=3e-4 FABRIC_EPOCHS=3 REMESH=1 MIRROR=1 PAIR=1 SOUP=1; garsim/weights/MODEL_CARD.md).
 # The script prints the last stage's model folder (and writes it to $OUT/model.txt); ship it with: .venv/bin/python -c "from garsim.model.garsim
 #   import GarSimModel; GarSimModel.load('<that folder>').save('garsim/weights')"
 set -euo pipefail
