@@ -38,19 +38,19 @@ def test_recipe_runs_every_stage_and_averages_the_fine_tunes(tmp_path):
 @pytest.mark.slow
 def test_recipe_with_init_skips_stage1_and_fine_tunes_that_model(tmp_path):
     init = ROOT / "garsim" / "weights"
+    run = tmp_path / "run"
     env = {
         **os.environ,
         "DATA": str(ROOT / "tests" / "fixtures" / "dataset_v2"),
-        "OUT": str(tmp_path / "run"),
+        "OUT": str(run),
         "INIT": str(init),
         **dict(PROCS="1", BATCH="2", FINETUNE_EPOCHS="1", FABRIC_EPOCHS="0", STAGE2_EPOCHS="0", SOUP="1"),
     }
     r = subprocess.run(["bash", "examples/train_v1.sh"], cwd=ROOT, env=env, capture_output=True, text=True)
     assert r.returncode == 0, r.stderr[-2000:]
     model = Path(r.stdout.strip().splitlines()[-1])
-    assert model == tmp_path / "run" / "finetune" / "soup"
-    assert not (tmp_path / "run" / "stage1").exists()
-    run = tmp_path / "run"
+    assert model == run / "finetune" / "soup"
+    assert not (run / "stage1").exists()
     start, fine, soup = (GarSimModel.load(p).state_dict() for p in (init, run / "finetune" / "best", model))
     key = next(iter(soup))
     assert (fine[key] - start[key]).abs().max() > 0  # trained from the given model...
