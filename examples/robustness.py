@@ -16,7 +16,7 @@ from pathlib import Path
 
 from garsim.api import GarSim
 from garsim.atomic import atomic_write_bytes
-from garsim.eval.robustness import measure, scenes_from_npz, scenes_from_store
+from garsim.eval.robustness import measure, scenes_from_jobs, scenes_from_npz, scenes_from_store
 
 
 def main() -> None:
@@ -28,6 +28,13 @@ def main() -> None:
     parser.add_argument(
         "--wide-poses", type=int, default=None, help="seed: --data's bodies in poses of the sampler's whole range"
     )
+    parser.add_argument(
+        "--jobs",
+        type=int,
+        default=None,
+        help="N garments as the generator plans them (--seed), built, not simulated, "
+        "in poses of the sampler's whole range (seeds from --wide-poses, default 0): no dataset needed",
+    )
     parser.add_argument("--external", default=None, help="a folder of external *.npz drapes and body_faces.npy")
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument(
@@ -35,13 +42,15 @@ def main() -> None:
     )
     parser.add_argument("--json", required=True)
     args = parser.parse_args()
-    if not args.data and not args.external:
-        parser.error("give --data DIR and/or --external DIR")
+    if not args.data and not args.external and not args.jobs:
+        parser.error("give --data DIR, --jobs N and/or --external DIR")
     sim = GarSim.load(args.model) if args.model else GarSim.pretrained()
     sources = [
         (str(d), lambda d=d: scenes_from_store(d, args.split, per_type=args.per_type, wide_poses=args.wide_poses))
         for d in args.data
     ]
+    if args.jobs:
+        sources.append((f"jobs:{args.jobs}", lambda: scenes_from_jobs(args.jobs, args.seed, args.wide_poses or 0)))
     if args.external:
         sources.append((str(args.external), lambda: scenes_from_npz(args.external)))
     sets = {}

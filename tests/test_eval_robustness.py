@@ -14,6 +14,7 @@ from garsim.eval.robustness import (
     measure,
     perturbation_changes,
     rest_displacement_mm,
+    scenes_from_jobs,
     scenes_from_npz,
     scenes_from_store,
     split_at_seam,
@@ -151,3 +152,25 @@ def test_scenes_from_the_fixture_store_and_from_npz_files(tmp_path):
     np.testing.assert_allclose(read.garment[0], s.garment[0], atol=1e-6)
     with pytest.raises(ValueError, match="body_faces.npy"):
         scenes_from_npz(tmp_path / "missing")
+
+
+def test_scenes_from_jobs_build_the_planned_garments_in_wide_poses():
+    from garsim.physics.generate import GenerateConfig, plan_jobs
+
+    scenes = scenes_from_jobs(2, seed=3, wide_poses=5)
+    jobs = plan_jobs(GenerateConfig(out=Path("."), seed=3, num_train=2, num_test=0, num_ood=0))
+    assert [s.garment_type for s in scenes] == [j.family for j in jobs] == ["skirt", "top"]
+    for scene, job in zip(scenes, jobs, strict=True):
+        assert scene.name == f"{job.job_id}-{job.construction}"
+        assert 0.6 * job.vertices < len(scene.garment[0]) < 1.6 * job.vertices  # built at the planned resolution
+        assert scene.garment[1].max() < len(scene.garment[0]) and scene.canonical[1] is scene.target[1]
+        moved = np.linalg.norm(scene.target[0] - scene.canonical[0], axis=1)
+        assert moved.max() > 0.05  # posed away from the canonical body, same topology
+        assert scene.fabric == job.fabrics[0]["name"] or scene.fabric == {
+            k: v for k, v in job.fabrics[0].items() if k != "name"
+        }
+    again = scenes_from_jobs(1, seed=3, wide_poses=5)[0]  # deterministic in the seeds
+    np.testing.assert_array_equal(again.target[0], scenes[0].target[0])
+    np.testing.assert_array_equal(again.garment[0], scenes[0].garment[0])
+    with pytest.raises(ValueError, match="count must be an integer >= 1"):
+        scenes_from_jobs(0)

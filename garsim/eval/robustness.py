@@ -211,17 +211,54 @@ def scenes_from_store(
     return scenes
 
 
+def scenes_from_jobs(count: int, seed: int = 0, wide_poses: int = 0) -> list[Scene]:
+    """``count`` garments as the data generator plans them (``plan_jobs`` with ``seed``: the families and both
+    constructions in turn, their sampled parameters, vertex counts, phenotypes and first fabrics), built on their
+    body's T-pose and not simulated, each draped onto its body in a pose of the sampler's whole range (seed
+    ``wide_poses`` + k): tangled drapes that stress the post-process without a dataset folder."""
+    from garsim.bodies.anny import AnnyBody
+    from garsim.data.sample import CUSTOM_FABRIC
+    from garsim.physics.generate import GenerateConfig, build_garment, plan_jobs
+
+    if isinstance(count, bool) or not isinstance(count, int) or count < 1:
+        raise ValueError(f"count must be an integer >= 1, got {count!r}")
+    jobs = plan_jobs(GenerateConfig(out=Path("."), seed=seed, num_train=count, num_test=0, num_ood=0))
+    scenes = []
+    for k, job in enumerate(jobs):
+        body = AnnyBody(job.phenotype)
+        garment = build_garment(job, body)
+        fabric = {key: v for key, v in job.fabrics[0].items() if key != "name"}
+        name = job.fabrics[0]["name"]
+        scenes.append(
+            Scene(
+                name=f"{job.job_id}-{job.construction}",
+                garment_type=job.family,
+                canonical=(body.canonical().vertices.astype(np.float64), body.faces),
+                target=(_posed_wide(body, wide_poses + k).astype(np.float64), body.faces),
+                garment=(garment.vertices.astype(np.float64), garment.faces),
+                fabric=fabric if name == CUSTOM_FABRIC else name,
+            )
+        )
+    return scenes
+
+
+def _posed_wide(body: Any, seed: int) -> np.ndarray:
+    """``body`` in a pose of the sampler's whole range."""
+    from garsim.bodies.poses import PoseSampler
+
+    return body.pose(PoseSampler(seed=seed, body=body).sample(1)[0]).vertices
+
+
 def _wide_pose(rec: Any, seed: int) -> np.ndarray:
     """The body of a dataset sequence (its phenotype) in a pose of the sampler's whole range."""
     from garsim.bodies.anny import AnnyBody
-    from garsim.bodies.poses import PoseSampler
 
     if "phenotype" not in rec.meta:
         raise ValueError(f"sequence {rec.seq_id} stores no phenotype: its body cannot be posed anew")
     body = AnnyBody(rec.meta["phenotype"])
     if len(body.faces) != len(rec.body_faces):
         raise ValueError(f"sequence {rec.seq_id}: its body is not Anny's topology")
-    return body.pose(PoseSampler(seed=seed, body=body).sample(1)[0]).vertices
+    return _posed_wide(body, seed)
 
 
 def scenes_from_npz(folder: str | Path) -> list[Scene]:
