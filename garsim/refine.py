@@ -70,7 +70,9 @@ averaged over the nearby facets (``CONTACT_BLEND``) instead of the closest featu
 under any small move of a vertex inside the body, then brought those wide poses' scenes over 0.5 mm from 8 to 6 and
 their median from 0.036 to 0.031 mm (``docs/studies/refine_contact_normal.md``). What still jumps, in drapes tangled
 with the body: a vertex whose nearest surface changes sides where two body parts nearly meet (crotch, armpit), and the
-Chebyshev step's gain, which carries such a jump over the sweeps.
+Chebyshev step's gain, which carries such a jump over the sweeps and rounds (~5x a round on the external trousers
+with a leg through them; momentum in the first round only, or less momentum, was no more stable on our own tangled
+drapes and less momentum broke the walk cycle's edges-through bound: ``docs/studies/refine_chebyshev.md``).
 
 Closest point on the obstacle (``garsim.geometry.inside.Obstacle``, the one exact query garsim has): a
 warp BVH over the obstacle's triangles (float32) finds each point's
