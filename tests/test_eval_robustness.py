@@ -174,3 +174,21 @@ def test_scenes_from_jobs_build_the_planned_garments_in_wide_poses():
     np.testing.assert_array_equal(again.garment[0], scenes[0].garment[0])
     with pytest.raises(ValueError, match="count must be an integer >= 1"):
         scenes_from_jobs(0)
+
+
+def test_the_robustness_script_on_one_planned_garment(tmp_path):
+    """examples/robustness.py --jobs: the shipped model's checks on a garment the generator plans, no dataset folder."""
+    import json
+    import os
+    import subprocess
+    import sys
+
+    out = tmp_path / "r.json"
+    script = Path(__file__).parents[1] / "examples" / "robustness.py"
+    cmd = [sys.executable, str(script), "--jobs", "1", "--seed", "4", "--wide-poses", "9", "--json", str(out)]
+    subprocess.run(cmd, check=True, capture_output=True, env={**os.environ, "OMP_NUM_THREADS": "1"})
+    report = json.loads(out.read_text())
+    (row,) = report["sets"]["jobs:1"]["rows"]
+    assert row["name"] == "train-00000-template" and row["garment_type"] == "skirt"  # the plan's first job
+    assert set(CHECKS) <= set(row) and all(np.isfinite(row[c]) for c in CHECKS)
+    assert row["obj_round_trip"] <= 0.5 and row["turn_180"] <= 0.5 and row["rest_mm"] <= 3.0
