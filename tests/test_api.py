@@ -314,6 +314,28 @@ def test_scenes_are_reused_by_content_and_never_stale(anny_body, scene, monkeypa
     assert pins.any() and not no_pins.any()
 
 
+def test_a_new_garment_takes_its_soft_anchor_once_for_the_prior_and_the_network(anny_body, scene, monkeypatch):
+    import garsim.geometry.proximity as proximity
+    from garsim.geometry.cache import clear_all
+    from garsim.model.config import GarSimConfig
+    from garsim.model.garsim import GarSimModel
+
+    c, t, g = scene
+    computed = []
+    real = proximity._soft_anchor
+    monkeypatch.setattr(proximity, "_soft_anchor", lambda pts, *a: computed.append(len(pts)) or real(pts, *a))
+    clear_all("garment")
+    sim = GarSim(
+        GarSimModel(GarSimConfig(latent=16, edge_latent=8, mlp_hidden=16, num_steps=1)).eval(), collision_margin=None
+    )
+    sim.drape((c.vertices, anny_body.faces), (t.vertices, anny_body.faces), (g.vertices, g.faces))
+    assert computed.count(len(g.vertices)) == 1  # the prior's skinning and the graph's anchor share one
+    shift = np.array([10.0, -3.0, 0.0])  # taken about the body's centroid, a scene moved 10 m anchors alike
+    near = proximity.soft_anchor(*proximity.about_centroid(g.vertices, c.vertices)[:2])
+    far = proximity.soft_anchor(*proximity.about_centroid(g.vertices + shift, c.vertices + shift)[:2])
+    assert abs(far - near).max() < 1e-9
+
+
 def test_a_garment_in_several_pieces_is_draped_with_a_warning(anny_body, scene, caplog):
     """A skirt cut in two by dropping a band of its faces: draped, with a warning that the pieces are one garment."""
     import logging

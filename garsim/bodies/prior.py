@@ -18,7 +18,7 @@ import scipy.sparse as sp
 
 from garsim.bodies.base import BodyModel, PosedBody
 from garsim.geometry.mesh import unique_edges
-from garsim.geometry.proximity import soft_anchor
+from garsim.geometry.proximity import about_centroid, soft_anchor
 from garsim.geometry.skinning import apply_transforms
 
 log = logging.getLogger(__name__)
@@ -135,8 +135,7 @@ class MeshPairPrior:
         from garsim.bodies.anny_rig import match_anny_rig
         from garsim.bodies.recover import RecoveredPrior
 
-        self.centre = np.asarray(canonical, dtype=np.float64).mean(axis=0)
-        self.garment, self.canonical = (np.asarray(a, dtype=np.float64) - self.centre for a in (garment, canonical))
+        self.garment, self.canonical, self.centre = about_centroid(garment, canonical)
         self.faces = faces
         rig = match_anny_rig(len(canonical), faces)
         self.lbs = None if rig is None else RecoveredPrior(self.garment, self.canonical, *rig)

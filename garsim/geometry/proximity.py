@@ -41,6 +41,15 @@ across the medial plane, 50x at 4 cm (0.05 mm for a 1 µm change), 200x at 2 cm.
 _SOFT_CACHE = ContentCache(8, scope="garment")  # per garment (and body)
 
 
+def about_centroid(points: np.ndarray, vertices: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``points`` and ``vertices`` (float64) less the vertices' centroid, and that centroid: the frame in which the
+    prior and the network's inputs take their soft anchor, so a moved scene anchors alike and both callers share one
+    cached :func:`soft_anchor` of a garment (the same arrays, bit for bit)."""
+    verts = np.asarray(vertices, dtype=np.float64)
+    centre = verts.mean(axis=0)
+    return np.asarray(points, dtype=np.float64) - centre, verts - centre, centre
+
+
 def soft_anchor(points: np.ndarray, vertices: np.ndarray, width: float = SOFT_ANCHOR_WIDTH) -> sp.csr_matrix:
     """(N, V) row-stochastic sparse weights blending, for each point, the body vertices near its closest one.
 

@@ -38,7 +38,7 @@ from garsim.garments.fabrics import Fabric, fabric_from_values, get_fabric
 from garsim.geometry.cache import ContentCache, content_key
 from garsim.geometry.io import as_mesh
 from garsim.geometry.mesh import cached_vertex_normals, directed_edges, face_pairs, vertex_rings
-from garsim.geometry.proximity import cached_tree, soft_anchor, soft_surface
+from garsim.geometry.proximity import about_centroid, cached_tree, soft_anchor, soft_surface
 from garsim.model.config import FABRIC_FEATURES, GarSimConfig
 
 _BODIES = ContentCache(8)  # per canonical body: its BodyFrame
@@ -214,8 +214,9 @@ class StaticGraph:
     ) -> None:
         n = len(g)
         body = body_frame(body_canonical, body_faces, cfg.canonicalize_yaw)
-        # soft anchor q_i: a continuous blend of the canonical body vertices near G_i
-        w = soft_anchor(g, body.vertices).tocoo()
+        # soft anchor q_i: a continuous blend of the canonical body vertices near G_i, taken about the body's centroid
+        # as the prior takes it (``bodies.prior.MeshPairPrior``), so a new garment's anchor is computed once
+        w = soft_anchor(*about_centroid(g, body.vertices)[:2]).tocoo()
         used, slot = np.unique(w.col, return_inverse=True)
         self.anchor_w = sp.csr_matrix((w.data, (w.row, slot)), shape=(n, len(used)))
         self.used = used
