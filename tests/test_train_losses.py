@@ -25,7 +25,7 @@ V = torch.tensor([[0.0, 0, 0], [1, 0, 0], [0, 1, 0], [1, 1, 1]])
 F = np.array([[0, 1, 2], [1, 3, 2]])
 
 
-def _graph(pred_target_offset=0.0):
+def _graph():
     g = GarmentGraph(
         num_nodes=4,
         pos=V.clone(),

@@ -313,9 +313,8 @@ class _Body:
             low.t0 = float(np.percentile(low.t(v[lo]), 1))
             low.t1 = float(np.percentile(low.t(v[hand]), 1)) if hand.any() else float(low.t(v[lo]).max())
             self.upper[s], self.lower[s] = u, low
-        # legs: knee and ankle heights
-        ul, ll, ft = self.mask("upperleg"), self.mask("lowerleg"), self.mask("foot")
-        self.z_knee = float(0.5 * (np.percentile(v[ul, 2], 1) + np.percentile(v[ll, 2], 99)))
+        # legs: the ankle height
+        ll, ft = self.mask("lowerleg"), self.mask("foot")
         self.z_ankle = float(0.5 * (np.percentile(v[ll, 2], 1) + np.percentile(v[ft, 2], 99)))
         # hips: widest slice between crotch and waist (legs included)
         zh, w_h = self._slice_halfwidth(torso | legs, self.z_crotch - 0.05, self.z_waist)

@@ -9,7 +9,6 @@ import numpy as np
 
 from garsim.garments.garment import Garment
 from garsim.geometry.io import zero_area_faces
-from garsim.geometry.mesh import boundary_edges
 
 
 @dataclass
@@ -156,8 +155,3 @@ def subdivide(faces: np.ndarray, num_vertices: int) -> tuple[np.ndarray, Barycen
     triangles = np.concatenate([np.stack([own, own, own], axis=1), np.column_stack([unique, unique[:, 0]])])
     weights = np.concatenate([np.tile([1.0, 0.0, 0.0], (num_vertices, 1)), np.tile([0.5, 0.5, 0.0], (len(unique), 1))])
     return fine, BarycentricMap(triangles, weights)
-
-
-def border_vertex_count(faces: np.ndarray) -> int:
-    """Number of distinct vertices on the mesh border."""
-    return int(len(np.unique(boundary_edges(faces))))

@@ -561,15 +561,6 @@ def mean_body_distance(vertices: np.ndarray, body_vertices: np.ndarray) -> float
     return float(nearest_vertices(vertices, body_vertices)[1].mean())
 
 
-def hem_fold_count(vertices: np.ndarray, loop: np.ndarray, center: np.ndarray) -> int:
-    """Folds along a hem loop: local maxima of the horizontal distance to ``center``, vertices ordered by angle."""
-    p = np.asarray(vertices, dtype=np.float64)[loop, :2] - np.asarray(center, dtype=np.float64)[:2]
-    r = np.linalg.norm(p, axis=1)[np.argsort(np.arctan2(p[:, 1], p[:, 0]))]
-    s = np.sign(np.diff(np.r_[r, r[0]]))
-    s = s[s != 0]
-    return int(np.count_nonzero(s != np.roll(s, 1)) // 2)
-
-
 def mean_fold_angle(vertices: np.ndarray, faces: np.ndarray) -> float:
     """Mean dihedral fold angle (degrees) between adjacent faces: 0 for a flat sheet, larger when folded."""
     n = face_normals(np.asarray(vertices, dtype=np.float64), faces)

@@ -149,17 +149,3 @@ class TemplateBody:
             return 0.0
         x = self.vertices[sel, 0]
         return float(x.max() - x.min())
-
-    def landmarks(self) -> dict[str, float]:
-        """Measured heights (m): crotch, hip, waist, armpit, shoulder, floor; chest half-width."""
-        return {
-            "z_crotch": self.z_crotch,
-            "z_hip": self.z_hip,
-            "z_waist": self.z_waist,
-            "z_armpit": self.z_armpit,
-            "z_shoulder": self.z_shoulder,
-            "z_floor": self.z_floor,
-            "chest_halfwidth": self.chest_halfwidth,
-            "shoulder_x": self.shoulder_x,
-            "neck_halfwidth": self.neck_halfwidth,
-        }
