@@ -21,11 +21,19 @@ def test_cached_rig_is_the_body_models(anny_body, tmp_path, monkeypatch):
         read = rig_module.anny_rig("anny")  # read back from the file
         for a, b in zip(built, read):
             np.testing.assert_array_equal(a, b)
-        faces, indices, weights, num_bones = read
+        faces, indices, weights, num_bones, root_weight = read
         np.testing.assert_array_equal(faces, anny_body.faces)
         np.testing.assert_array_equal(indices, anny_body.skin_indices)
         np.testing.assert_array_equal(weights, anny_body.skin_weights)
         assert num_bones == len(anny_body.bone_labels)
+        root = [anny_body.bone_labels.index(b) for b in rig_module.ROOT_BONES]
+        dense = np.zeros((len(indices), num_bones))
+        np.add.at(dense, (np.repeat(np.arange(len(indices)), indices.shape[1]), indices.ravel()), weights.ravel())
+        np.testing.assert_allclose(root_weight, dense[:, root].sum(axis=1), atol=1e-12)
+        region = rig_module.anny_root_region(len(anny_body.rest_vertices), anny_body.faces)
+        pelvis = anny_body.rest_vertices[region]  # a band around the pelvis, clear of the hands
+        assert 100 < region.sum() < 400 and np.ptp(pelvis[:, 2]) < 0.25 and np.abs(pelvis[:, 0]).max() < 0.2
+        assert rig_module.anny_root_region(100, anny_body.faces) is None
         assert rig_module.match_anny_rig(len(anny_body.rest_vertices), anny_body.faces)[2] == num_bones
         assert rig_module.match_anny_rig(len(anny_body.rest_vertices), anny_body.faces[::-1]) is None
         assert rig_module.match_anny_rig(100, anny_body.faces) is None

@@ -21,21 +21,31 @@ from garsim.eval.robustness import (
     turn_about_vertical,
 )
 from garsim.geometry.io import load_mesh
+from garsim.geometry.rigid import yaw_alignment
 
 FIXTURE = Path(__file__).parent / "fixtures" / "dataset_v2"
 
 
 class Offset:
-    """Drapes by adding ``offset`` (world frame) plus ``ramp`` x the vertex's index / N: not equivariant to turns
-    when ``offset`` is horizontal, and dependent on the vertex order when ``ramp`` is not zero."""
+    """Drapes by moving the garment with the target body's turn and move from the canonical one, then adding
+    ``offset`` (world frame) plus ``ramp`` x the vertex's index / N: not equivariant to turns when ``offset`` is
+    horizontal, and dependent on the vertex order when ``ramp`` is not zero."""
 
     def __init__(self, offset=(0.0, 0.0, 0.0), ramp=(0.0, 0.0, 0.0)):
         self.offset, self.ramp = np.asarray(offset), np.asarray(ramp)
 
     def drape(self, canonical, target, garment, fabric):
-        v, _ = load_mesh(garment) if isinstance(garment, str) else garment
-        v = np.asarray(v, dtype=np.float64)
+        (v, _), (c, _), (t, _) = (load_mesh(m) if isinstance(m, str) else m for m in (garment, canonical, target))
+        rot, shift = yaw_alignment(c, t)
+        v = np.asarray(v, dtype=np.float64) @ rot.T + shift
         return v + self.offset + self.ramp * (np.arange(len(v)) / len(v))[:, None]
+
+
+class Still(Offset):
+    """``Offset`` that ignores the target body: the garment stays where the canonical body has it."""
+
+    def drape(self, canonical, target, garment, fabric):
+        return super().drape(canonical, canonical, garment, fabric)
 
 
 def _scene(n: int = 40) -> Scene:
@@ -64,6 +74,15 @@ def test_a_world_frame_offset_is_caught_by_the_turns_by_hand():
     assert changes["turn_37"] == pytest.approx(20.0 * np.sin(np.radians(18.5)), rel=1e-6)
     assert changes["turn_180"] == pytest.approx(20.0, rel=1e-6)
     assert changes["shift_10m"] < 1e-6 and changes["face_permutation"] < 1e-6
+    # the target alone turned 90 deg: the garment follows it, the offset does not turn with it
+    assert changes["target_turn_90"] == pytest.approx(10.0 * np.sqrt(2.0), rel=1e-6)
+    assert changes["target_shift_2m"] < 1e-6
+
+
+def test_a_draper_that_ignores_the_target_body_is_caught_when_it_moves_alone():
+    changes = perturbation_changes(Still(), _scene())
+    assert changes["target_shift_2m"] == pytest.approx(1000.0 * np.linalg.norm([1.2, -1.6, 0.05]), rel=1e-6)
+    assert changes["target_turn_90"] > 100.0 and changes["turn_37"] < 1e-3
 
 
 def test_an_order_dependent_draper_is_caught_by_the_vertex_permutation():
@@ -99,9 +118,9 @@ def test_a_draper_that_reads_the_file_s_connectivity_is_caught_by_the_seam_split
 
 
 def test_the_noise_check_takes_the_largest_change_over_its_draws():
-    """The identity draper moves a vertex exactly as much as the noise does: the check is the largest noise vector's
-    length over the draws (the first draw is the single-draw check's own), in micrometres here."""
-    sim = Offset()
+    """A draper that leaves the garment in place moves a vertex exactly as much as the noise does: the check is the
+    largest noise vector's length over the draws (the first draw is the single-draw check's own), in micrometres."""
+    sim = Still()
     one = perturbation_changes(sim, _scene(), seed=5)["noise"]
     three = perturbation_changes(sim, _scene(), seed=5, noise_draws=3)["noise"]
     rng = np.random.default_rng(5)

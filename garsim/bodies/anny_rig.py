@@ -37,18 +37,25 @@ def rig_cache_path(topology: str = "anny") -> Path:
     return anny_cache_dir() / f"rig-{topology}-anny{_anny_version()}.npz"
 
 
-def _build(topology: str) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
+ROOT_BONES = ("root", "pelvis.L", "pelvis.R")
+"""Anny's bones above every joint that garsim's poses turn (``bodies.poses``: legs, spine, arms, neck): in every
+training sample they stay where the canonical body has them, so the skin they carry places the target body's root."""
+
+
+def _build(topology: str) -> tuple[np.ndarray, np.ndarray, np.ndarray, int, np.ndarray]:
     from garsim.bodies.anny import AnnyBody
 
     body = AnnyBody(topology=topology)
-    return body.faces, body.skin_indices, body.skin_weights, len(body.bone_labels)
+    root = np.isin(body.skin_indices, [body.bone_labels.index(b) for b in ROOT_BONES])
+    root_weight = (np.asarray(body.skin_weights, dtype=np.float64) * root).sum(axis=1)
+    return body.faces, body.skin_indices, body.skin_weights, len(body.bone_labels), root_weight
 
 
-def _read(path: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray, int] | None:
+def _read(path: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray, int, np.ndarray] | None:
     try:
         with np.load(path, allow_pickle=False) as z:
             faces, indices, weights = z["faces"], z["skin_indices"], z["skin_weights"]
-            num_bones = int(z["num_bones"])
+            num_bones, root_weight = int(z["num_bones"]), z["root_weight"]
     except Exception as exc:  # noqa: BLE001 - truncated (BadZipFile), foreign or partial file: rebuild it
         log.info("rebuilding the Anny rig cache %s (%s)", path, exc)
         return None
@@ -58,22 +65,33 @@ def _read(path: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray, int] | None:
         and indices.shape == weights.shape
         and indices.ndim == 2
         and (indices.size == 0 or 0 <= indices.min() <= indices.max() < num_bones)
+        and root_weight.shape == (len(indices),)
     )
-    return (faces.astype(np.int64), indices.astype(np.int64), weights.astype(np.float64), num_bones) if ok else None
+    if not ok:
+        return None
+    return faces.astype(np.int64), indices.astype(np.int64), weights.astype(np.float64), num_bones, root_weight
 
 
 @lru_cache(maxsize=4)
-def anny_rig(topology: str = "anny") -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
-    """(faces, skin_indices, skin_weights, num_bones) of an Anny topology (phenotype-independent), from the
-    disk cache when present (built from ``AnnyBody`` and stored otherwise)."""
+def anny_rig(topology: str = "anny") -> tuple[np.ndarray, np.ndarray, np.ndarray, int, np.ndarray]:
+    """(faces, skin_indices, skin_weights, num_bones, root_weight) of an Anny topology (phenotype-independent;
+    ``root_weight``: each vertex's skinning weight on ``ROOT_BONES``), from the disk cache when present (built from
+    ``AnnyBody`` and stored otherwise; a cache without a field is rebuilt)."""
     path = rig_cache_path(topology)
     rig = _read(path) if path.exists() else None
     if rig is not None:
         return rig
     rig = _build(topology)
-    faces, indices, weights, num_bones = rig
+    faces, indices, weights, num_bones, root_weight = rig
     buf = io.BytesIO()
-    np.savez(buf, faces=faces, skin_indices=indices, skin_weights=weights, num_bones=np.int64(num_bones))
+    np.savez(
+        buf,
+        faces=faces,
+        skin_indices=indices,
+        skin_weights=weights,
+        num_bones=np.int64(num_bones),
+        root_weight=root_weight,
+    )
     try:
         from garsim.atomic import atomic_write_bytes
 
@@ -87,10 +105,23 @@ def match_anny_rig(num_vertices: int, faces: np.ndarray) -> tuple[np.ndarray, np
     """Skinning of the Anny topology that ``faces`` belongs to, or None for any other mesh."""
     if num_vertices != ANNY_VERTICES:  # the default 'anny' topology; others are not matched by vertex count
         return None
-    rig_faces, indices, weights, num_bones = anny_rig("anny")
+    rig_faces, indices, weights, num_bones, _ = anny_rig("anny")
     if not same_quads(np.asarray(faces), rig_faces):
         return None
     return indices, weights, num_bones
+
+
+ROOT_REGION_WEIGHT = 0.2
+"""Skinning weight on ``ROOT_BONES`` from which a vertex belongs to the root region: 181 vertices around the pelvis
+(Anny's largest such weight is 0.52; at 0.3, 97 vertices). Over v5test's poses they move 2 mm (median, 10 mm at most)
+and turn under 3 degrees about the vertical between the canonical and the target body."""
+
+
+def anny_root_region(num_vertices: int, faces: np.ndarray) -> np.ndarray | None:
+    """(V,) bool: the root region (``ROOT_REGION_WEIGHT``) of a body in the Anny topology, or None for any other."""
+    if match_anny_rig(num_vertices, faces) is None:
+        return None
+    return anny_rig("anny")[4] >= ROOT_REGION_WEIGHT
 
 
 MAX_FLIPPED_SHARE = 0.01

@@ -13,7 +13,9 @@ outputs at any garment vertex, after undoing the change:
   file: glTF stores one vertex per UV, so exporters split vertices at UV seams), draped from the file; every copy
   must land where its vertex does;
 - ``turn_37``, ``turn_180``: the whole scene turned about the vertical (z) axis, the output turned back;
-- ``shift_10m``: the whole scene moved 10 m horizontally, the output moved back.
+- ``shift_10m``: the whole scene moved 10 m horizontally, the output moved back;
+- ``target_turn_90``, ``target_shift_2m``: the target body alone turned 90 deg about the vertical or moved 2 m (an
+  avatar's root motion), the output turned or moved back.
 
 ``rest_mm`` is the mean displacement (mm) of the template draped onto its own canonical body (target = canonical):
 a settled garment on a body that does not move should stay.
@@ -39,11 +41,19 @@ STABILITY_CHECKS: tuple[str, ...] = (
     "vertex_permutation",
     "seam_split",
 )
-EQUIVARIANCE_CHECKS: tuple[str, ...] = ("turn_37", "turn_180", "shift_10m")
+SHIFT_M = np.array([10.0 / np.sqrt(2.0), -10.0 / np.sqrt(2.0), 0.0])  # 10 m, horizontal
+MOVES: dict[str, tuple[float, np.ndarray | None, bool]] = {
+    "turn_37": (37.0, None, True),
+    "turn_180": (180.0, None, True),
+    "shift_10m": (0.0, SHIFT_M, True),
+    "target_turn_90": (90.0, None, False),
+    "target_shift_2m": (0.0, np.array([1.2, -1.6, 0.05]), False),
+}
+"""Equivariance checks: (degrees about the vertical, shift in m, whether the whole scene moves); the ``target_``
+ones move the target body alone (an avatar's root motion: it turns round or walks off), the garment must follow."""
+EQUIVARIANCE_CHECKS: tuple[str, ...] = tuple(MOVES)
 CHECKS: tuple[str, ...] = STABILITY_CHECKS + EQUIVARIANCE_CHECKS
 NOISE_M = 1e-6
-TURNS_DEG: dict[str, float] = {"turn_37": 37.0, "turn_180": 180.0}
-SHIFT_M = np.array([10.0 / np.sqrt(2.0), -10.0 / np.sqrt(2.0), 0.0])  # 10 m, horizontal
 
 Mesh = tuple[np.ndarray, np.ndarray]
 
@@ -121,13 +131,12 @@ def perturbation_changes(sim: Any, scene: Scene, seed: int = 0, noise_draws: int
     perm = rng.permutation(len(gv))
     permuted = _drape(sim, can, tgt, (gv[perm], np.argsort(perm)[gf]), scene.fabric)
     out["vertex_permutation"] = _max_mm(permuted, ref[perm])
-    for check in EQUIVARIANCE_CHECKS:
-        degrees, shift = (TURNS_DEG[check], None) if check in TURNS_DEG else (0.0, SHIFT_M)
+    for check, (degrees, shift, whole) in MOVES.items():
 
         def move(mesh: Mesh, degrees: float = degrees, shift: np.ndarray | None = shift) -> Mesh:
             return turn_about_vertical(mesh[0], degrees, shift), mesh[1]
 
-        moved = _drape(sim, move(can), move(tgt), move((gv, gf)), scene.fabric)
+        moved = _drape(sim, move(can) if whole else can, move(tgt), move((gv, gf)) if whole else (gv, gf), scene.fabric)
         back = turn_about_vertical(moved - (0.0 if shift is None else shift), -degrees)
         out[check] = _max_mm(back, ref)
     return out
