@@ -5,6 +5,7 @@ from __future__ import annotations
 import dataclasses
 import functools
 import logging
+import os
 from pathlib import Path
 from typing import Any
 
@@ -458,6 +459,22 @@ def smooth_corrections(frames: np.ndarray, priors: np.ndarray, sigma: float) -> 
 _COARSE = ContentCache(8, scope="garment")  # per garment: its decimated copy and the maps both ways
 
 
+def is_mesh_pair(obj: Any) -> bool:
+    """Whether ``obj`` is one (vertices (V, 3), faces (F, 3) integers) pair of arrays, not a list of meshes."""
+    if not isinstance(obj, (tuple, list)) or len(obj) != 2:
+        return False
+    verts, faces = (np.asarray(a) if isinstance(a, np.ndarray) else None for a in obj)
+    return (
+        verts is not None
+        and faces is not None
+        and verts.ndim == 2
+        and verts.shape[1:] == (3,)
+        and faces.ndim == 2
+        and faces.shape[1:] == (3,)
+        and np.issubdtype(faces.dtype, np.integer)
+    )
+
+
 def root_frame(sample: Sample) -> tuple[np.ndarray, np.ndarray] | None:
     """(R, t): how the target body's root (Anny's pelvis region, ``bodies.anny_rig.anny_root_region``) is turned
     about the vertical and moved from the canonical body's (``geometry.rigid.yaw_alignment``), or None for a body
@@ -727,6 +744,11 @@ class GarSim:
         topology, the rig fit of the canonical body and the network's pose-free features; each frame pays for its
         target body's prior, the network and the refinement.
         """
+        if isinstance(body_targets, (str, os.PathLike)) or is_mesh_pair(body_targets):
+            raise ValueError(
+                "body_targets is one mesh: give a list of target bodies (meshes, files or vertex arrays) or a "
+                "(T, V, 3) array; one target: GarSim.drape"
+            )
         targets = list(body_targets)
         if not targets:
             raise ValueError("body_targets is empty: give at least one target body")

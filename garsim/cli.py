@@ -246,8 +246,10 @@ def _drape_targets(values: list[str]) -> list[Path]:
     paths = []
     for value in values:
         p = Path(value)
+        if not p.exists():
+            raise ValueError(f"--target {p}: no such file or folder")
         if not p.is_dir():
-            paths.append(p)  # a missing or unreadable file is reported when it is read
+            paths.append(p)  # an unreadable file is reported when it is read
             continue
         found = natural_order(
             q for q in p.iterdir() if q.suffix.lower() in MESH_INPUTS and not q.name.startswith(".") and q.is_file()
@@ -267,8 +269,8 @@ def _same_file(a: Path, b: str | Path) -> bool:
 
 def cmd_drape(args: argparse.Namespace) -> int:
     batch = len(args.target) > 1 or any(Path(t).is_dir() for t in args.target)
-    out, png, ext = _drape_outputs(args, batch)  # outputs first: nothing is computed for a bad path
-    targets = _drape_targets(args.target)
+    targets = _drape_targets(args.target)  # listed, not read: a missing path or an empty folder is said first
+    out, png, ext = _drape_outputs(args, batch)  # then the outputs: nothing is computed for a bad path
     if batch:
         outs = [out / f"{t.stem}{ext}" for t in targets]
         pngs = [png / f"{t.stem}.png" if png else None for t in targets]
@@ -576,7 +578,10 @@ def cmd_animate(args: argparse.Namespace) -> int:
         from garsim.bodies import poses
 
         if args.motion:
-            sequence = poses.motion(args.motion, frames)  # an unknown motion fails before Anny is built
+            try:  # before Anny is built
+                sequence = poses.motion(args.motion, frames)
+            except ValueError as exc:  # a motion of K keyframes (its start included) needs K frames
+                raise ValueError(f"--frames {frames} for --motion {args.motion}: the motion's {exc}") from None
         else:
             sequence = poses.read_pose_sequence(args.poses)
             if args.interpolate is not None:

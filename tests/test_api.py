@@ -55,6 +55,13 @@ def test_bad_inputs_are_refused_with_clear_errors(anny_body, scene):
         sim.drape(body_c, body_t, (bad, g.faces))
     with pytest.raises(ValueError, match="pinned"):
         make_sample(body_c, body_t, (g.vertices, g.faces), pinned=[len(g.vertices) + 5])
+    # one target where a sequence goes, several where one goes: said so, not read letter by letter
+    for one in ("bodies", body_t):
+        with pytest.raises(ValueError, match="body_targets is one mesh"):
+            sim.drape_sequence(body_c, one, (g.vertices, g.faces))
+    with pytest.raises(MeshError, match="2 file paths where one mesh goes.*drape_sequence"):
+        sim.drape(body_c, ["b.obj", "c.obj"], (g.vertices, g.faces))
+    assert sim.drape_sequence(body_c, [c.vertices, t.vertices], (g.vertices, g.faces)).shape == (2, *g.vertices.shape)
 
 
 def test_inference_path_never_imports_the_simulator():

@@ -348,6 +348,9 @@ def test_read_pose_sequence_formats_agree(tmp_path):
     (tmp_path / "mixed.json").write_text(json.dumps([{"neck01": [0, 0, 0]}, {"hip_flexion_L": 10}]))
     with pytest.raises(ValueError, match="frame 1 uses other names than frame 0"):
         read_pose_sequence(tmp_path / "mixed.json")
+    (tmp_path / "rest.json").write_text(json.dumps([{}, {"hip_flexion_L": 30.0}, {}]))  # {}: every bone at rest
+    rest = read_pose_sequence(tmp_path / "rest.json")
+    assert rest[0] == {} and rest[2] == {} and set(rest[1]) == set(frame)
     (tmp_path / "latin1.json").write_bytes(b'[{"neck01": [0, 0, 0]}] \xe9')
     with pytest.raises(ValueError, match="latin1.json: not a readable pose file"):
         read_pose_sequence(tmp_path / "latin1.json")

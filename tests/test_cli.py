@@ -579,6 +579,8 @@ def test_drape_batch_writes_one_output_per_target(scene, tmp_path, capsys):
         ("--png a file name", ["--target", "good/", "--out", "o/", "--png", "x.png"], "give a folder"),
         ("two targets, one name", ["--target", "good/a.obj", "bodies/a.obj", "--out", "o/"], "rename one"),
         ("no meshes in the folder", ["--target", "empty/", "--out", "o/"], "no mesh files"),
+        ("no meshes, --out a file", ["--target", "empty/", "--out", "o.obj"], "no mesh files"),
+        ("a missing folder", ["--target", "nothing/", "--out", "o/"], "nothing: no such file or folder"),
         ("output over the targets", ["--target", "good/", "--out", "good/"], "would overwrite the input"),
     ],
 )

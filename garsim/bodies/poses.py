@@ -601,8 +601,10 @@ def _as_rotvec(name: str, value: object, where: str) -> np.ndarray:
 
 def _frame_pose(frame: Mapping[str, object], where: str) -> dict[str, np.ndarray]:
     """One frame of a pose file: Anny bones -> axis-angle, or garsim joint angles (degrees) -> axis-angle."""
-    if not isinstance(frame, Mapping) or not frame:
-        raise PoseFileError(f"{where}: a frame must be a non-empty object of bone (or joint-angle) names")
+    if not isinstance(frame, Mapping):
+        raise PoseFileError(f"{where}: a frame must be an object of bone (or joint-angle) names")
+    if not frame:  # every bone left out: Anny's rest pose
+        return {}
     keys = set(frame)
     angles = keys & set(angle_names())
     if angles and angles != keys:
@@ -668,11 +670,13 @@ def read_pose_sequence(path: str | Path) -> list[dict[str, np.ndarray]]:
     if not isinstance(frames, list) or not frames:
         raise PoseFileError(f'{p}: expected a non-empty list of frames (or {{"frames": [...]}})')
     out = [_frame_pose(f, f"{p} frame {t}") for t, f in enumerate(frames)]
-    angles = [bool(set(f) & set(angle_names())) for f in frames]
+    named = [t for t, f in enumerate(frames) if f]  # an empty frame (the rest pose) is of either kind
+    angles = [bool(set(frames[t]) & set(angle_names())) for t in named]
     if len(set(angles)) > 1:
+        first = named[angles.index(not angles[0])]
         raise PoseFileError(
-            f"{p}: frame {angles.index(not angles[0])} uses other names than frame 0 (joint angles vs "
-            "Anny bones); use one kind per file"
+            f"{p}: frame {first} uses other names than frame {named[0]} (joint angles vs Anny bones); use one kind "
+            "per file"
         )
     return out
 

@@ -907,6 +907,11 @@ def as_mesh(obj: Any, name: str | None = None) -> tuple[np.ndarray, np.ndarray]:
     if trimesh is not None and isinstance(obj, trimesh.Scene):
         obj = obj.to_mesh() if hasattr(obj, "to_mesh") else obj.dump(concatenate=True)
     if isinstance(obj, (tuple, list)):
+        if obj and all(isinstance(o, (str, os.PathLike)) for o in obj):
+            raise MeshError(
+                f"{label}: got {len(obj)} file paths where one mesh goes; give one (several target bodies: "
+                "GarSim.drape_sequence, or the CLI's --target with a folder)"
+            )
         if len(obj) != 2:
             raise MeshError(f"{label}: expected a (vertices, faces) pair, got a sequence of length {len(obj)}")
         return _validated(obj[0], obj[1], name or "mesh")
