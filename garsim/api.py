@@ -539,13 +539,14 @@ def postprocess(
 class GarSim:
     """Drapes a garment from a canonical body onto a target body in one step.
 
-    ``GarSim.prior_only()`` returns the garment deformation prior (LBS-like skinning), the
-    baseline every learned model must beat.
+    ``GarSim.pretrained()`` is the shipped model, ``GarSim.load(folder)`` a trained one, ``GarSim(model)`` any model
+    object with ``predict(sample)`` and ``config``, and ``GarSim.prior_only()`` the garment deformation prior
+    (LBS-like skinning; ``model=None``), the baseline every learned model must beat.
     """
 
     def __init__(
         self,
-        model: Any = None,
+        model: Any,
         collision_margin: float | None = 0.002,
         max_vertices: int | None = None,
         refine: bool = True,
