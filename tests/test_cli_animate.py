@@ -59,6 +59,7 @@ def test_every_export_matches_the_per_frame_drapes(case, tmp_path):
     assert points.GetTimeSamples() == [0.0, 1.0, 2.0]
     got = np.stack([np.asarray(points.Get(float(k))) for k in range(3)])
     np.testing.assert_allclose(got, expected, atol=1e-5)
+    np.testing.assert_allclose(np.asarray(points.Get()), expected[0], atol=1e-5)  # a static reader: frame 0
     body_points = UsdGeom.Mesh(stage.GetPrimAtPath("/Scene/Body")).GetPointsAttr()
     np.testing.assert_allclose(np.asarray(body_points.Get(2.0)), bodies[2], atol=1e-5)
 

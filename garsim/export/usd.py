@@ -1,7 +1,8 @@
 """USD (.usd/.usda/.usdc) export through ``pxr`` (usd-core): time-sampled UsdGeom.Mesh prims.
 
 Stage layout: ``/Scene`` (Xform, default prim) with ``/Scene/Garment`` and, if given, ``/Scene/Body``.
-Each mesh has ``points`` (and ``extent``) sampled at time codes 0 .. T-1, triangle
+Each mesh has ``points`` (and ``extent``) sampled at time codes 0 .. T-1 (the first frame also as their default
+value, for readers of a static mesh), triangle
 ``faceVertexCounts``/``faceVertexIndices`` (vertex order kept), ``subdivisionScheme = none``, optional
 ``primvars:st`` (vertex interpolation) and ``normals``. Stage metadata: ``upAxis`` and ``metersPerUnit`` as given
 (garsim's Z and 1 by default; the points are written as given, no conversion), ``timeCodesPerSecond =
@@ -41,8 +42,9 @@ def _define_mesh(stage: Any, prim_path: str, frames: np.ndarray, faces: np.ndarr
     mesh.CreateDoubleSidedAttr(True)
     mesh.CreateFaceVertexCountsAttr(Vt.IntArray.FromNumpy(np.full(len(faces), 3, dtype=np.int32)))
     mesh.CreateFaceVertexIndicesAttr(Vt.IntArray.FromNumpy(faces.astype(np.int32).ravel()))
-    points = mesh.CreatePointsAttr()
-    extent = mesh.CreateExtentAttr()
+    # the first frame is also the attributes' default: what a reader that asks for no time (a static mesh) gets
+    points = mesh.CreatePointsAttr(Vt.Vec3fArray.FromNumpy(np.ascontiguousarray(frames[0], dtype=np.float32)))
+    extent = mesh.CreateExtentAttr(Vt.Vec3fArray.FromNumpy(np.stack([frames[0].min(axis=0), frames[0].max(axis=0)])))
     for k in range(len(frames)):
         pts = Vt.Vec3fArray.FromNumpy(np.ascontiguousarray(frames[k], dtype=np.float32))
         points.Set(pts, float(k))
@@ -53,6 +55,7 @@ def _define_mesh(stage: Any, prim_path: str, frames: np.ndarray, faces: np.ndarr
         if normals.ndim == 2:
             attr.Set(Vt.Vec3fArray.FromNumpy(np.ascontiguousarray(normals)))
         else:
+            attr.Set(Vt.Vec3fArray.FromNumpy(np.ascontiguousarray(normals[0])))
             for k in range(len(normals)):
                 attr.Set(Vt.Vec3fArray.FromNumpy(np.ascontiguousarray(normals[k])), float(k))
     if uvs is not None:
