@@ -187,7 +187,9 @@ def check_scene(body: np.ndarray, body_faces: np.ndarray, garment: np.ndarray, u
         if not 0.1 <= _size(other) / height <= 1.5 or (reading.startswith("scaled") and 0.1 <= own_size <= 1.5):
             continue
         other_median, other_inside = _fit(tree, body, normals, other)
-        if other_median < min(BETTER_FIT * median, 0.1) and other_inside <= 0.01:
+        # much nearer the body, or a garment partly inside it (as given) that lies nearer and outside it so read
+        nearer = min(BETTER_FIT * median, 0.1) if inside <= INSIDE_WARN else min(median, FAR_FROM_BODY)
+        if other_median < nearer and other_inside <= 0.01:
             raise MeshError(
                 f"the garment is in another axis or unit than the canonical body: {reading} it would lie "
                 f"{100 * other_median:.1f} cm from the body instead of {100 * median:.1f} cm; give every mesh in one "

@@ -162,6 +162,12 @@ def test_plainly_wrong_axis_units_or_far_garment_are_refused(anny_body, scene):
         sim.drape((c.vertices * 100, anny_body.faces), (t.vertices * 100, anny_body.faces), (g.vertices * 100, g.faces))
     with pytest.raises(MeshError, match="draped on the canonical body"):
         sim.drape((c.vertices, anny_body.faces), (t.vertices, anny_body.faces), (g.vertices + [1.0, 0, 0], g.faces))
+    # a long flared skirt saved Y-up cuts through the body as read (12% inside): its axis is named, not its inside
+    flared = make_garment("skirt", anny_body, {"length": 0.6, "flare": 0.6}, target_vertices=400)
+    with pytest.raises(MeshError, match="another axis.*turned from Y-up to Z-up"):
+        sim.drape(
+            (c.vertices, anny_body.faces), (t.vertices, anny_body.faces), (z_up_to_y_up(flared.vertices), flared.faces)
+        )
 
 
 def test_pinned_vertices_follow_the_prior_and_sequences_match_single_drapes(anny_body, scene):
