@@ -35,6 +35,8 @@ def _pinned_mask(pinned: Any, n: int) -> np.ndarray:
         if p.shape != (n,):
             raise ValueError(f"pinned mask has shape {p.shape}; expected ({n},) booleans, one per garment vertex")
         return p
+    if p.size and not (np.issubdtype(p.dtype, np.number) and np.all(p == np.round(p))):
+        raise ValueError(f"pinned indices must be whole vertex numbers (or a boolean mask), got {p.ravel()[:4]!r}")
     idx = p.astype(np.int64).ravel()
     if idx.size and (idx.min() < 0 or idx.max() >= n):
         raise ValueError(f"pinned indices must be in [0, {n}), got range [{idx.min()}, {idx.max()}]")

@@ -55,6 +55,9 @@ def test_bad_inputs_are_refused_with_clear_errors(anny_body, scene):
         sim.drape(body_c, body_t, (bad, g.faces))
     with pytest.raises(ValueError, match="pinned"):
         make_sample(body_c, body_t, (g.vertices, g.faces), pinned=[len(g.vertices) + 5])
+    with pytest.raises(ValueError, match="whole vertex numbers"):
+        make_sample(body_c, body_t, (g.vertices, g.faces), pinned=[0.5, 1.2])
+    assert make_sample(body_c, body_t, (g.vertices, g.faces), pinned=[0.0, 3.0]).pinned.sum() == 2  # 3.0 is a number
     # one target where a sequence goes, several where one goes: said so, not read letter by letter
     for one in ("bodies", body_t):
         with pytest.raises(ValueError, match="body_targets is one mesh"):
