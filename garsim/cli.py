@@ -960,6 +960,9 @@ def _epilog(name: str) -> str:
 def build_parser() -> argparse.ArgumentParser:
     parser = _Parser(prog="garsim", description=__doc__.split("\n\n")[0], epilog=_epilog("garsim"))
     parser.add_argument("-v", "--verbose", action="store_true", help="log at INFO level")
+    from garsim import __version__
+
+    parser.add_argument("--version", action="version", version=f"garsim {__version__}")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
 
     def command(name: str, help_text: str, parent: argparse._SubParsersAction = sub) -> argparse.ArgumentParser:

@@ -222,6 +222,14 @@ def test_help_shows_defaults_and_an_example(command):
         assert "(default: " in r.stdout
 
 
+def test_version_is_the_package_version(capsys):
+    from garsim import __version__
+
+    with pytest.raises(SystemExit) as exc:
+        main(["--version"])
+    assert exc.value.code == 0 and capsys.readouterr().out.strip() == f"garsim {__version__}"
+
+
 def test_help_defaults_are_the_library_defaults(capsys):
     """Options that leave their default to a config class show that class's value (read without importing it)."""
     import dataclasses
