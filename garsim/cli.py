@@ -503,18 +503,20 @@ def _load_targets(src: Path, canonical: tuple, args: argparse.Namespace) -> tupl
         )
     try:
         with np.load(src, allow_pickle=False) as z:
-            if "vertices" not in z.files:
+            # 'vertices', or the bodies of a `garsim animate --out x.npz` (its 'body_frames')
+            key = next((k for k in ("vertices", "body_frames") if k in z.files), None)
+            if key is None:
                 raise ValueError(
                     f"--targets {src}: no array 'vertices' (has {', '.join(z.files) or 'none'}); "
                     "store the target bodies as vertices (T, V, 3)"
                 )
-            targets = np.asarray(z["vertices"])
+            targets = np.asarray(z[key])
     except ValueError:
         raise
     except Exception as exc:  # noqa: BLE001 - a truncated or foreign file raises zipfile/pickle/OS errors
         raise ValueError(f"--targets {src}: not a readable .npz ({type(exc).__name__}: {exc})") from None
     if targets.ndim != 3 or targets.shape[-1] != 3 or len(targets) == 0:
-        raise ValueError(f"--targets {src}: 'vertices' must have shape (T, V, 3) with T >= 1, got {targets.shape}")
+        raise ValueError(f"--targets {src}: '{key}' must have shape (T, V, 3) with T >= 1, got {targets.shape}")
     return list(targets), fps
 
 
@@ -1082,11 +1084,11 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument(
         "--targets",
-        help="folder of target body OBJs (in name order, numbers by value), an .npz with 'vertices' (T, V, 3), a "
-        ".glb/.gltf whose body is animated (skin, shape keys or node motion; sampled at --fps from its first to "
-        "its last key), a USD stage (time-sampled points, moving transforms or a UsdSkel skin, sampled at --fps, "
-        "by default its own time codes per second; its declared axis and unit converted to --up/--units) or a "
-        ".pc2 point cache of the canonical body",
+        help="folder of target body OBJs (in name order, numbers by value), an .npz with 'vertices' (T, V, 3) "
+        "(or an animate .npz's 'body_frames'), a .glb/.gltf whose body is animated (skin, shape keys or node "
+        "motion; sampled at --fps from its first to its last key), a USD stage (time-sampled points, moving "
+        "transforms or a UsdSkel skin, sampled at --fps, by default its own time codes per second; its declared "
+        "axis and unit converted to --up/--units) or a .pc2 point cache of the canonical body",
     )
     p.add_argument("--animation", help="a .glb/.gltf --targets file's animation, by name or index (default: the first)")
     p.add_argument("--body-mesh", metavar="NAME", help=BODY_MESH_HELP.format(targets="--targets"))

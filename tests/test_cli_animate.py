@@ -190,6 +190,11 @@ def test_npz_output_is_the_viewers_sequence_with_the_prior(case, tmp_path):
     np.testing.assert_allclose(view.prior_frames, read_pc2(tmp_path / "p.pc2")[0], atol=1e-5)
     np.testing.assert_allclose(view.body_frames, bodies, atol=1e-5)
     assert view.correction().max() > 0.005
+    # its bodies ('body_frames') are targets again: the same drape
+    again = ["animate", "--garment", str(folder / "skirt.obj"), "--canonical", str(folder / "canonical.obj")]
+    again += ["--targets", str(tmp_path / "a.npz"), "--smoothing", "0", "--quiet", "--out", str(tmp_path / "b.pc2")]
+    assert main(again) == 0
+    np.testing.assert_allclose(read_pc2(tmp_path / "b.pc2")[0], read_pc2(tmp_path / "a.pc2")[0], atol=1e-5)
 
 
 def test_a_folder_of_unpadded_frames_plays_in_number_order_and_normals_face_as_given(case, tmp_path):
