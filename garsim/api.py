@@ -125,7 +125,8 @@ CHECK_POINTS = 2000
 reordered mesh gets the same verdict)."""
 BETTER_FIT = 0.7
 """A garment turned between Y-up and Z-up, or scaled by a power of ten, that lies this much nearer the canonical
-body (median distance), within 10 cm of it, with at most 1% inside it and a garment's size (its bounding box's
+body (median distance), within 10 cm of it (a garment over ``INSIDE_WARN`` inside the body as read: nearer at all,
+within ``FAR_FROM_BODY``), with at most 1% inside it and a garment's size (its bounding box's
 diagonal 0.1-1.5x the body's height) is in another axis or unit than the body: refused. A scaled reading is tried
 only for a garment whose own size is not a garment's (scaled about the origin, a large garment may land nearer a body
 that is not centred there). On the fixture's and the external set's garments the best such reading is 1.15-4.9x
@@ -450,13 +451,21 @@ def check_smoothing(smoothing: Any) -> float:
     return sigma
 
 
-def smooth_corrections(frames: np.ndarray, priors: np.ndarray, sigma: float) -> np.ndarray:
+def smooth_corrections(
+    frames: np.ndarray, priors: np.ndarray, sigma: float, rotations: np.ndarray | None = None
+) -> np.ndarray:
     """(T, N, 3) frames whose correction to the prior is Gaussian-smoothed over time (std ``sigma`` frames,
-    the ends extended by their nearest frame): ``priors + g_sigma * (frames - priors)``."""
+    the ends extended by their nearest frame): ``priors + g_sigma * (frames - priors)``. ``rotations`` (T, 3, 3):
+    each frame's root-frame turn (:func:`root_frame`); the corrections are smoothed in the root frame, so those of a
+    body that turns round are not averaged across its turn."""
     from scipy.ndimage import gaussian_filter1d
 
     correction = np.asarray(frames, np.float64) - priors
+    if rotations is not None:
+        correction = np.einsum("tnj,tji->tni", correction, rotations)  # each row x R_t: into the root frame
     smoothed = gaussian_filter1d(correction, sigma, axis=0, mode="nearest", truncate=3.0)
+    if rotations is not None:
+        smoothed = np.einsum("tni,tji->tnj", smoothed, rotations)  # x R_t^T: back to the world
     return (priors + smoothed).astype(np.float32)
 
 
@@ -471,6 +480,7 @@ def is_mesh_pair(obj: Any) -> bool:
     return (
         verts is not None
         and faces is not None
+        and np.issubdtype(verts.dtype, np.floating)  # two integer target arrays are two targets, not a mesh
         and verts.ndim == 2
         and verts.shape[1:] == (3,)
         and faces.ndim == 2
@@ -768,8 +778,10 @@ class GarSim:
                 raw.append(self.raw(samples[-1]))
                 bar.update()
             priors = np.stack([s.prior for s in samples])
+            turns = None  # each frame's root-frame turn: the corrections are smoothed in the body's root frame
             if sigma > 0 and len(raw) > 1:
-                raw = list(smooth_corrections(np.stack(raw), priors, sigma))
+                turns = np.stack([np.eye(3) if f is None else f[0] for f in map(root_frame, samples)])
+                raw = list(smooth_corrections(np.stack(raw), priors, sigma, turns))
             refined = self.model is not None and self.refine and self.collision_margin is not None
             twice = refined and sigma > 0 and len(samples) > 1
             memos: list = [None] * len(samples)
@@ -782,7 +794,7 @@ class GarSim:
                 done.append(self.finish(pred, sample, memo))
                 bar.update()
             if twice:  # the refinement's own frame-to-frame changes, smoothed
-                again = smooth_corrections(np.stack(done), priors, sigma)
+                again = smooth_corrections(np.stack(done), priors, sigma, turns)
                 # without the fallback: the first pass handed what needed it to the prior, the smoothing spread that
                 # over time; handing patches to it again here would bring back the jumps the smoothing removed
                 done = [self.finish(p, s, m, fallback=False) for s, p, m in zip(samples, again, memos)]

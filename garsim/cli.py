@@ -511,6 +511,8 @@ def _load_targets(src: Path, canonical: tuple, args: argparse.Namespace) -> tupl
                     "store the target bodies as vertices (T, V, 3)"
                 )
             targets = np.asarray(z[key])
+            if key == "body_frames":  # an animate .npz stores garsim's frame (Z up, metres): read as --up/--units
+                targets = from_internal(targets, args.up, args.units)
     except ValueError:
         raise
     except Exception as exc:  # noqa: BLE001 - a truncated or foreign file raises zipfile/pickle/OS errors

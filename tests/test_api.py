@@ -95,6 +95,44 @@ class _ShiftModel:
         return sample.prior + self.shift
 
 
+class _ReadsTarget(_ShiftModel):
+    """A stand-in network whose answer depends on where the target body stands: the prior moved by a tenth of the
+    target body's mean, plus the constant shift."""
+
+    def predict(self, sample):
+        return sample.prior + self.shift + 0.1 * np.asarray(sample.body_target).mean(axis=0)
+
+
+def test_a_target_turned_and_moved_alone_is_draped_in_its_root_frame(anny_body, scene):
+    from garsim.eval.robustness import turn_about_vertical
+
+    c, t, g = scene
+    sim = GarSim(_ReadsTarget(), collision_margin=None)
+    body_c, garment = (c.vertices, anny_body.faces), (g.vertices, g.faces)
+    ref = sim.drape(body_c, (t.vertices, anny_body.faces), garment).astype(np.float64)
+    for degrees, shift in ((90.0, None), (0.0, np.array([1.2, -1.6, 0.05])), (37.0, np.array([-2.0, 0.5, 0.0]))):
+        moved = turn_about_vertical(t.vertices, degrees, shift).astype(np.float32)
+        out = sim.drape(body_c, (moved, anny_body.faces), garment)
+        back = turn_about_vertical(out - (0.0 if shift is None else shift), -degrees)
+        np.testing.assert_allclose(back, ref, atol=2e-5)  # the network saw the body where it had stood
+
+
+def test_a_turning_sequence_smooths_its_corrections_in_the_root_frame(anny_body, scene):
+    from garsim.eval.robustness import turn_about_vertical
+
+    c, t, g = scene
+    sim = GarSim(_ShiftModel(), collision_margin=None)
+    body_c, garment = (c.vertices, anny_body.faces), (g.vertices, g.faces)
+    angles = np.linspace(0.0, 180.0, 12)  # the body turns round over the sequence: the correction turns with it
+    targets = [turn_about_vertical(t.vertices, a).astype(np.float32) for a in angles]
+    smooth = sim.drape_sequence(body_c, targets, garment, smoothing=3)
+    prior = GarSim.prior_only().drape_sequence(body_c, targets, garment)
+    for k, target in enumerate(targets):
+        rot, _ = root_frame(make_sample(body_c, (target, anny_body.faces), garment))
+        expected = _ShiftModel.shift @ rot.T  # constant in the root frame: smoothing leaves it as it is
+        np.testing.assert_allclose(smooth[k] - prior[k], np.broadcast_to(expected, prior[k].shape), atol=1e-5)
+
+
 def test_dense_garments_are_draped_at_max_vertices_and_carried_back(anny_body, scene):
     c, t, _ = scene
     dense = make_garment("skirt", anny_body, target_vertices=3000)

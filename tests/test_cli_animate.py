@@ -195,6 +195,17 @@ def test_npz_output_is_the_viewers_sequence_with_the_prior(case, tmp_path):
     again += ["--targets", str(tmp_path / "a.npz"), "--smoothing", "0", "--quiet", "--out", str(tmp_path / "b.pc2")]
     assert main(again) == 0
     np.testing.assert_allclose(read_pc2(tmp_path / "b.pc2")[0], read_pc2(tmp_path / "a.pc2")[0], atol=1e-5)
+    # in another axis and unit: the garment and canonical body given Y up in cm, the .npz's bodies are converted
+    from garsim.geometry.io import from_internal, load_mesh, save_mesh
+
+    for name in ("skirt", "canonical"):
+        v, f = load_mesh(folder / f"{name}.obj")
+        save_mesh(tmp_path / f"{name}_ycm.obj", from_internal(v, "y", "cm"), f)
+    ycm = ["animate", "--garment", str(tmp_path / "skirt_ycm.obj"), "--canonical", str(tmp_path / "canonical_ycm.obj")]
+    ycm += ["--targets", str(tmp_path / "a.npz"), "--up", "y", "--units", "cm", "--smoothing", "0", "--quiet"]
+    assert main([*ycm, "--out", str(tmp_path / "c.pc2")]) == 0
+    got = read_pc2(tmp_path / "c.pc2")[0]  # the PC2 is written in the input's axis and unit
+    np.testing.assert_allclose(got, from_internal(read_pc2(tmp_path / "a.pc2")[0], "y", "cm"), atol=2e-3)
 
 
 def test_a_folder_of_unpadded_frames_plays_in_number_order_and_normals_face_as_given(case, tmp_path):

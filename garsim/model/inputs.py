@@ -277,7 +277,8 @@ class StaticGraph:
 def target_surface(points: np.ndarray, body: np.ndarray, faces: np.ndarray, rot: np.ndarray) -> np.ndarray:
     """(N, SURFACE_FEATURES) float32: per point, the offset from its soft anchor on ``body``, the body's blended unit
     normal there (``soft_surface``) and the signed distance along it (negative inside), vectors turned by ``rot``
-    (world -> body frame). The body's normals are cached by content: the API's push-out of the same pose reuses them."""
+    (world -> body frame). The body's normals are cached by content (the API gives the network the target in its
+    root frame, ``api.root_frame``, and its push-out the target as given: each has its own unless they coincide)."""
     p = np.asarray(points, dtype=np.float64)
     anchor, n = soft_surface(p, body, cached_vertex_normals(body, faces))
     offset = p - anchor
