@@ -494,8 +494,10 @@ def root_frame(sample: Sample) -> tuple[np.ndarray, np.ndarray] | None:
     about the vertical and moved from the canonical body's (``geometry.rigid.yaw_alignment``), or None for a body
     in another topology. The network sees the target body and the prior moved back by it and its garment is moved
     on by it (ours, not the paper's): an avatar that walks off or turns round (root motion) is draped as if it had
-    stayed, and the garment follows it exactly. Every training sample keeps the root in place (within 2 mm and 3
-    degrees over v5test's poses), and v0.9 alone moved 14 mm at a vertex (median) for a 1 cm move of the target."""
+    stayed, and the garment follows it exactly. The region is skin, not bone: over v5test's poses it moves 2 mm (median;
+    10 mm at most) and turns under 3 degrees, in the motion library's deep sit 14.5 mm (the groin follows the thighs;
+    stricter regions move more: ``docs/studies/root_frame.md``). v0.9 alone moved 14 mm at a vertex (median) for a 1
+    cm move of the target."""
     region = anny_root_region(len(sample.body_canonical), np.asarray(sample.body_faces))
     if region is None:
         return None
