@@ -74,7 +74,7 @@ def main() -> None:
             "prior_mm": err(s.prior),
             "raw_mm": err(bare),
             "raw_root_frame_mm": err(with_root),
-            "root_turn_deg": float(np.degrees(np.arctan2(rot[1, 0], rot[0, 0]))),
+            "root_turn_deg": abs(float(np.degrees(np.arctan2(rot[1, 0], rot[0, 0])))),  # its size
             "root_move_mm": 1000.0 * float(np.linalg.norm(shift)),
             "root_frame_change_max_mm": 1000.0 * float(np.abs(with_root - bare).max()),
             "target_1cm_change_max_mm": 1000.0 * float(np.abs(stepped - bare).max()),
